@@ -1,0 +1,125 @@
+"""The ``Motion`` record passed between every stage, and its .npz file format."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import zipfile
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from physmotion.conventions import FPS
+from physmotion.errors import MotionFormatError, ShapeError
+from physmotion.skeleton import NUM_JOINTS, inverse_kinematics
+
+
+@dataclass
+class Motion:
+    """One motion on the 22-joint skeleton.
+
+    joints: (T, 22, 3) float32, metres, Y up (world frame).
+    rotations: (T, 22, 3, 3) float32 local rotations (see :mod:`physmotion.skeleton`), or None.
+    offsets: (22, 3) rest offsets of this body in metres, or None (needed with rotations).
+    fps: frames per second. text: caption(s). licence_tag: "NC" for non-commercial data, else "".
+    """
+
+    joints: np.ndarray
+    fps: float = FPS
+    rotations: np.ndarray | None = None
+    offsets: np.ndarray | None = None
+    texts: list[str] = field(default_factory=list)
+    licence_tag: str = ""
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        self.joints = np.asarray(self.joints, dtype=np.float32)
+        check_joints(self.joints)
+        if self.fps <= 0 or not np.isfinite(self.fps):
+            raise ShapeError(f"fps must be a positive number, got {self.fps}")
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.joints.shape[0])
+
+    @property
+    def seconds(self) -> float:
+        return self.num_frames / self.fps
+
+    def with_rotations(self) -> Motion:
+        """This motion with local rotations and offsets solved by IK if it has none."""
+        if self.rotations is not None and self.offsets is not None:
+            return self
+        from physmotion.skeleton import offsets_from_joints
+
+        offsets = offsets_from_joints(self.joints)
+        rot, _ = inverse_kinematics(self.joints, offsets)
+        return replace(self, rotations=rot.astype(np.float32), offsets=offsets.astype(np.float32))
+
+    def save(self, path: str | Path) -> None:
+        """Write an .npz (joints, rotations, offsets, fps, text, licence_tag) atomically."""
+        arrays: dict[str, np.ndarray] = {
+            "joints": self.joints,
+            "fps": np.float32(self.fps),
+            "text": np.array("\n".join(self.texts)),
+            "licence_tag": np.array(self.licence_tag),
+            "source": np.array(self.source),
+        }
+        if self.rotations is not None:
+            arrays["rotations"] = np.asarray(self.rotations, dtype=np.float32)
+        if self.offsets is not None:
+            arrays["offsets"] = np.asarray(self.offsets, dtype=np.float32)
+        write_atomic(path, lambda f: np.savez(f, **arrays))
+
+    @classmethod
+    def load(cls, path: str | Path) -> Motion:
+        """Read a motion .npz written by :meth:`save` (or any .npz with a ``joints`` array)."""
+        path = Path(path)
+        if not path.is_file():
+            raise MotionFormatError(f"{path}: no such file")
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                if "joints" not in data:
+                    raise MotionFormatError(f"{path}: not a motion file (no 'joints' array)")
+                text = str(data["text"]) if "text" in data else ""
+                return cls(
+                    joints=data["joints"],
+                    fps=float(data["fps"]) if "fps" in data else FPS,
+                    rotations=data["rotations"] if "rotations" in data else None,
+                    offsets=data["offsets"] if "offsets" in data else None,
+                    texts=[t for t in text.split("\n") if t],
+                    licence_tag=str(data["licence_tag"]) if "licence_tag" in data else "",
+                    source=str(data["source"]) if "source" in data else "",
+                )
+        except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+            raise MotionFormatError(f"{path}: not a readable .npz file ({exc})") from None
+
+
+def check_joints(joints: np.ndarray, name: str = "joints") -> None:
+    """Raise ShapeError unless joints is a finite (T, 22, 3) array with T >= 1."""
+    if joints.ndim != 3 or joints.shape[1:] != (NUM_JOINTS, 3):
+        raise ShapeError(f"{name} must have shape (T, {NUM_JOINTS}, 3), got {tuple(joints.shape)}")
+    if joints.shape[0] == 0:
+        raise ShapeError(f"{name} has zero frames")
+    if not np.all(np.isfinite(joints)):
+        raise ShapeError(f"{name} contains NaN or infinite values")
+
+
+def write_atomic(path: str | Path, write: Callable[[object], None], mode: str = "wb") -> None:
+    """Write a file through a temporary file in the same folder, renamed into place at the end.
+
+    A failure part-way leaves nothing behind at ``path``.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, mode) as f:
+            write(f)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
