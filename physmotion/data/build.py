@@ -1,0 +1,260 @@
+"""Build a dataset in HumanML3D's folder layout from a mocap collection (manifest + raw files).
+
+Layout written (HumanML3D's, plus two files of ours)::
+
+    new_joints/<id>.npy       (T, 22, 3) float32 canonical joints the features encode (T = feature frames)
+    new_joint_vecs/<id>.npy   (T, 263) float32 HumanML3D features
+    texts/<id>.txt            one caption per line
+    train.txt val.txt test.txt   ids, one per line
+    Mean.npy Std.npy          feature statistics of the train split (HumanML3D's cal_mean_variance)
+    index.csv                 id, clip, take, source, licence_tag, window start/end frames, mirrored
+    build_info.json           source, options, counts, skipped clips with reasons
+
+Differences from HumanML3D, on purpose: ``new_joints`` holds the processed joints that went into the
+features rather than joints recovered from them, so the round trip features -> joints can be checked;
+Mean/Std come from the train split only, so no statistic leaks from test data.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import os
+import re
+import shutil
+import tempfile
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from physmotion.conventions import FPS, MAX_FRAMES, MIN_FRAMES
+from physmotion.errors import PhysmotionError
+from physmotion.features.humanml3d import extract_features
+from physmotion.features.normalize import compute_mean_std
+from physmotion.io.importer import ClipInfo, import_clip, load_manifest
+from physmotion.skeleton import mirror_joints
+
+SPLITS = ("train", "val", "test")
+BUILD_INFO = "build_info.json"
+
+
+@dataclass(frozen=True)
+class BuildConfig:
+    """Options of a dataset build; every field ends up in build_info.json."""
+
+    exclude_licences: tuple[str, ...] = ()
+    """Licence tags to leave out, e.g. ("NC",)."""
+    split_ratios: tuple[float, float, float] = (0.8, 0.1, 0.1)
+    seed: int = 0
+    """Salts the take -> split hash; another seed gives another (still take-disjoint) split."""
+    mirror: bool = True
+    """Add a left/right mirrored copy of every window (ids prefixed "M"), as HumanML3D does."""
+    max_frames: int = MAX_FRAMES
+    min_frames: int = MIN_FRAMES
+    jobs: int = 0
+    """Worker processes; 0 means one per CPU core."""
+
+
+@dataclass
+class BuildReport:
+    out: Path
+    num_clips: int = 0
+    num_items: dict[str, int] = field(default_factory=dict)
+    minutes: float = 0.0
+    skipped: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass
+class _Item:
+    id: str
+    clip: str
+    take: str
+    source: str
+    licence_tag: str
+    start: int
+    end: int
+    mirrored: bool
+    texts: list[str]
+    features: np.ndarray
+    joints: np.ndarray
+
+
+def split_of(take: str, config: BuildConfig) -> str:
+    """The split a take belongs to: a stable hash, so a take never straddles two splits and adding
+    clips to a collection does not move the others."""
+    digest = hashlib.sha1(f"{config.seed}:{take}".encode()).digest()
+    u = int.from_bytes(digest[:8], "big") / 2**64
+    train, val, _ = config.split_ratios
+    return "train" if u < train else "val" if u < train + val else "test"
+
+
+def windows(num_frames: int, max_frames: int = MAX_FRAMES) -> list[tuple[int, int]]:
+    """Cut ``num_frames`` joint frames into windows of at most ``max_frames`` feature frames.
+
+    Features have one frame fewer than the joints they come from, so a window [s, e) of joints
+    gives e - s - 1 feature frames; neighbouring windows share one joint frame. Windows are of
+    near-equal length. Returns [(start, end)] joint-frame ranges.
+    """
+    steps = num_frames - 1
+    count = max(1, -(-steps // max_frames))
+    bounds = np.linspace(0, steps, count + 1).round().astype(int)
+    return [(int(a), int(b) + 1) for a, b in zip(bounds[:-1], bounds[1:])]
+
+
+_SWAP = re.compile(r"\b(left|right)\b", re.IGNORECASE)
+
+
+def mirror_text(text: str) -> str:
+    """Caption of the mirrored motion: 'left' and 'right' swapped, case kept."""
+
+    def swap(m: re.Match[str]) -> str:
+        word = m.group(0)
+        new = "right" if word.lower() == "left" else "left"
+        return new.capitalize() if word[0].isupper() else new
+
+    return _SWAP.sub(swap, text)
+
+
+def _process_clip(info: ClipInfo, config: BuildConfig) -> list[_Item] | str:
+    """Import one clip and cut it into feature windows; a string is the reason it was skipped."""
+    try:
+        motion = import_clip(info)
+    except PhysmotionError as exc:
+        return str(exc)
+    if motion.num_frames - 1 < config.min_frames:
+        return f"too short: {motion.num_frames} frames at 20 fps, need {config.min_frames + 1}"
+    items: list[_Item] = []
+    for k, (s, e) in enumerate(windows(motion.num_frames, config.max_frames)):
+        if e - s - 1 < config.min_frames:
+            continue
+        for mirrored in (False, True) if config.mirror else (False,):
+            joints = motion.joints[s:e]
+            joints = mirror_joints(joints) if mirrored else joints
+            feats, canon = extract_features(joints)
+            texts = [mirror_text(t) for t in motion.texts] if mirrored else list(motion.texts)
+            items.append(
+                _Item(
+                    id=f"{'M' if mirrored else ''}{info.clip}_{k:02d}",
+                    clip=info.clip, take=info.take, source=info.source, licence_tag=info.licence_tag,
+                    start=s, end=e, mirrored=mirrored, texts=texts,
+                    features=feats.astype(np.float32), joints=canon[:-1].astype(np.float32),
+                )  # fmt: skip
+            )
+    return items
+
+
+def build_dataset(
+    source: str | Path,
+    out: str | Path,
+    config: BuildConfig | None = None,
+    progress: bool = True,
+) -> BuildReport:
+    """Import every clip of ``source``'s manifest and write a HumanML3D-layout dataset to ``out``.
+
+    The folder appears whole or not at all: it is written next to ``out`` and renamed into place.
+    An existing ``out`` is replaced only if it is an earlier build (has build_info.json).
+    Deterministic: the same source and config give byte-identical files.
+    """
+    config = config or BuildConfig()
+    out = Path(out)
+    if out.exists() and not (out / BUILD_INFO).is_file():
+        raise PhysmotionError(f"{out} exists and is not a physmotion dataset build; choose another --out")
+    clips = [c for c in load_manifest(source) if c.licence_tag not in config.exclude_licences]
+    if not clips:
+        raise PhysmotionError(f"{source}: no clips left to build (all excluded by licence?)")
+
+    report = BuildReport(out=out, num_clips=len(clips))
+    results = _run_all(clips, config, progress)
+    items: list[_Item] = []
+    for info, result in zip(clips, results):
+        if isinstance(result, str):
+            report.skipped[info.clip] = result
+        else:
+            items.extend(result)
+    if not items:
+        raise PhysmotionError(f"{source}: no clip could be imported")
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}."))
+    try:
+        report.num_items, report.minutes = _write_layout(tmp, items, config)
+        info = {
+            "source": str(Path(source)),
+            "config": asdict(config),
+            "clips": report.num_clips,
+            "items": report.num_items,
+            "minutes": round(report.minutes, 3),
+            "licence_tags": sorted({i.licence_tag or "open" for i in items}),
+            "skipped": report.skipped,
+        }
+        (tmp / BUILD_INFO).write_text(json.dumps(info, indent=2, sort_keys=True) + "\n")
+        _replace_dir(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return report
+
+
+def _run_all(clips: list[ClipInfo], config: BuildConfig, progress: bool) -> list[list[_Item] | str]:
+    from rich.progress import Progress
+
+    jobs = config.jobs or os.cpu_count() or 1
+    with Progress(disable=not progress, transient=True) as bar:
+        task = bar.add_task("importing clips", total=len(clips))
+        if jobs == 1:
+            results = []
+            for info in clips:
+                results.append(_process_clip(info, config))
+                bar.advance(task)
+            return results
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            futures = [pool.submit(_process_clip, info, config) for info in clips]
+            results = []
+            for fut in futures:  # in manifest order, so the build is deterministic
+                results.append(fut.result())
+                bar.advance(task)
+            return results
+
+
+def _write_layout(root: Path, items: list[_Item], config: BuildConfig) -> tuple[dict[str, int], float]:
+    for sub in ("new_joints", "new_joint_vecs", "texts"):
+        (root / sub).mkdir()
+    split_ids: dict[str, list[str]] = {s: [] for s in SPLITS}
+    for item in items:
+        np.save(root / "new_joints" / f"{item.id}.npy", item.joints)
+        np.save(root / "new_joint_vecs" / f"{item.id}.npy", item.features)
+        (root / "texts" / f"{item.id}.txt").write_text("\n".join(item.texts) + "\n")
+        split_ids[split_of(item.take, config)].append(item.id)
+    for split, ids in split_ids.items():
+        (root / f"{split}.txt").write_text("".join(f"{i}\n" for i in ids))
+
+    train = set(split_ids["train"]) or {i.id for i in items}
+    mean, std = compute_mean_std([i.features for i in items if i.id in train])
+    np.save(root / "Mean.npy", mean.astype(np.float32))
+    np.save(root / "Std.npy", std.astype(np.float32))
+
+    with open(root / "index.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["id", "clip", "take", "source", "licence_tag", "split", "start", "end", "mirrored"])
+        for i in items:
+            w.writerow([i.id, i.clip, i.take, i.source, i.licence_tag, split_of(i.take, config),
+                        i.start, i.end, int(i.mirrored)])  # fmt: skip
+    counts = {s: len(ids) for s, ids in split_ids.items()}
+    # Minutes of distinct motion: mirrored copies are not counted twice.
+    minutes = sum(i.features.shape[0] for i in items if not i.mirrored) / FPS / 60
+    return counts, minutes
+
+
+def _replace_dir(new: Path, out: Path) -> None:
+    """Swap ``new`` into ``out`` with renames, so readers never see a half-written folder."""
+    if out.exists():
+        trash = out.with_name(f".{out.name}.old")
+        shutil.rmtree(trash, ignore_errors=True)
+        os.replace(out, trash)
+        os.replace(new, out)
+        shutil.rmtree(trash, ignore_errors=True)
+    else:
+        os.replace(new, out)

@@ -1,0 +1,126 @@
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from physmotion.conventions import MAX_FRAMES, MIN_FRAMES
+from physmotion.data.build import SPLITS, BuildConfig, build_dataset, mirror_text, split_of, windows
+from physmotion.data.stats import dataset_stats
+from physmotion.errors import PhysmotionError
+from physmotion.features.humanml3d import FEATURE_DIM, recover_from_ric
+from physmotion.io.importer import load_manifest
+
+pytestmark = pytest.mark.slow
+
+
+def _index(root: Path) -> list[dict]:
+    with open(root / "index.csv", newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def test_layout_and_counts(built_dir: Path, built) -> None:
+    for sub in ("new_joints", "new_joint_vecs", "texts"):
+        assert (built_dir / sub).is_dir()
+    for name in ("Mean.npy", "Std.npy", "index.csv", "build_info.json", "train.txt", "val.txt", "test.txt"):
+        assert (built_dir / name).is_file()
+    mean, std = np.load(built_dir / "Mean.npy"), np.load(built_dir / "Std.npy")
+    assert mean.shape == std.shape == (FEATURE_DIM,)
+    assert np.all(std > 0) and np.all(np.isfinite(mean))
+    ids = [line for s in SPLITS for line in (built_dir / f"{s}.txt").read_text().split()]
+    assert len(ids) == len(set(ids)) == len(_index(built_dir))
+    assert all(n > 0 for n in built.num_items.values())
+    assert built.minutes > 30  # the collection holds about 38 minutes; short clips cost a little
+    print(f"\nbuilt {sum(built.num_items.values())} items {built.num_items}, {built.minutes:.2f} min, "
+          f"skipped {len(built.skipped)}: {built.skipped}")
+
+
+def test_every_skip_has_a_reason(built) -> None:
+    assert all(isinstance(r, str) and r and "\n" not in r for r in built.skipped.values())
+
+
+def test_splits_keep_takes_and_clips_on_one_side(built_dir: Path) -> None:
+    side_of_take: dict[str, str] = {}
+    side_of_clip: dict[str, str] = {}
+    for row in _index(built_dir):
+        assert side_of_take.setdefault(row["take"], row["split"]) == row["split"]
+        assert side_of_clip.setdefault(row["clip"], row["split"]) == row["split"]
+    assert set(side_of_take.values()) == set(SPLITS)
+
+
+def test_window_lengths(built_dir: Path) -> None:
+    for path in (built_dir / "new_joint_vecs").glob("*.npy"):
+        feats = np.load(path)
+        joints = np.load(built_dir / "new_joints" / path.name)
+        assert MIN_FRAMES <= feats.shape[0] <= MAX_FRAMES
+        assert feats.shape == (joints.shape[0], FEATURE_DIM)
+
+
+def test_features_to_joints_round_trip_over_whole_dataset(built_dir: Path) -> None:
+    errors = []
+    for path in sorted((built_dir / "new_joint_vecs").glob("*.npy")):
+        rec = recover_from_ric(torch.from_numpy(np.load(path))).numpy()
+        ref = np.load(built_dir / "new_joints" / path.name)
+        errors.append(np.linalg.norm(rec - ref, axis=-1).mean())
+    mean_mm = float(np.mean(errors)) * 1000
+    print(f"\nround trip features -> joints over {len(errors)} items: mean {mean_mm:.4f} mm, "
+          f"worst item {max(errors) * 1000:.4f} mm")
+    assert mean_mm < 1.0
+
+
+def test_licence_tags_follow_the_manifest(built_dir: Path, mocap_dir: Path) -> None:
+    tag_of = {c.clip: c.licence_tag for c in load_manifest(mocap_dir)}
+    rows = _index(built_dir)
+    assert all(row["licence_tag"] == tag_of[row["clip"]] for row in rows)
+    assert {row["licence_tag"] for row in rows} == {"", "NC"}
+    info = json.loads((built_dir / "build_info.json").read_text())
+    assert info["licence_tags"] == ["NC", "open"]
+
+
+def test_mirrored_copies_have_mirrored_captions(built_dir: Path) -> None:
+    rows = {r["id"]: r for r in _index(built_dir)}
+    mirrored = [i for i, r in rows.items() if r["mirrored"] == "1"]
+    assert mirrored and all(i[1:] in rows for i in mirrored)
+    assert mirror_text("Turns Left then right") == "Turns Right then left"
+
+
+def test_two_builds_are_identical(built_dir: Path, mocap_dir: Path, tmp_path: Path) -> None:
+    again = build_dataset(mocap_dir, tmp_path / "again", BuildConfig(), progress=False).out
+    for name in ("train.txt", "val.txt", "test.txt", "index.csv", "Mean.npy", "Std.npy"):
+        assert (again / name).read_bytes() == (built_dir / name).read_bytes(), name
+    a, b = dataset_stats(built_dir), dataset_stats(again)
+    assert (a.items, a.minutes, a.vocabulary) == (b.items, b.minutes, b.vocabulary)
+
+
+def test_exclude_non_commercial(mocap_dir: Path, tmp_path: Path) -> None:
+    out = build_dataset(mocap_dir, tmp_path / "open", BuildConfig(exclude_licences=("NC",)), progress=False).out
+    rows = _index(out)
+    assert rows and all(r["licence_tag"] == "" for r in rows)
+    assert all(not r["source"].startswith("bandai") for r in rows)
+
+
+def test_refuses_to_overwrite_a_foreign_folder(mocap_dir: Path, tmp_path: Path) -> None:
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "precious.txt").write_text("keep me")
+    with pytest.raises(PhysmotionError, match="not a physmotion dataset build"):
+        build_dataset(mocap_dir, tmp_path / "mine", progress=False)
+    assert (tmp_path / "mine" / "precious.txt").read_text() == "keep me"
+
+
+@pytest.mark.parametrize("frames", [41, 196, 197, 198, 400, 1000])
+def test_windows_cover_the_clip_within_limits(frames: int) -> None:
+    wins = windows(frames)
+    assert wins[0][0] == 0 and wins[-1][1] == frames
+    assert all(b == c + 1 for (_, b), (c, _) in zip(wins[:-1], wins[1:]))  # share one joint frame
+    assert all(e - s - 1 <= MAX_FRAMES for s, e in wins)
+
+
+def test_split_assignment_is_stable_and_salted() -> None:
+    takes = [f"take_{i}" for i in range(400)]
+    a = [split_of(t, BuildConfig()) for t in takes]
+    assert a == [split_of(t, BuildConfig()) for t in takes]
+    assert a != [split_of(t, BuildConfig(seed=1)) for t in takes]
+    share = a.count("train") / len(a)
+    assert 0.7 < share < 0.9

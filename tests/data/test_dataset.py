@@ -1,0 +1,83 @@
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from physmotion.conventions import MAX_FRAMES, MIN_FRAMES
+from physmotion.data.dataset import MotionDataset, collate, read_captions
+from physmotion.errors import PhysmotionError
+from physmotion.features.normalize import Normalizer
+
+pytestmark = pytest.mark.slow
+
+
+def test_items_are_cropped_to_whole_units(built_dir: Path) -> None:
+    ds = MotionDataset(built_dir, "train")
+    for i in range(0, len(ds), 7):
+        item = ds[i]
+        assert item["length"] % 4 == 0 and MIN_FRAMES - 4 <= item["length"] <= MAX_FRAMES
+        assert item["motion"].shape == (item["length"], 263)
+        assert item["text"] in ds.items[i].captions
+
+
+def test_normalised_with_the_folder_statistics(built_dir: Path) -> None:
+    raw = MotionDataset(built_dir, "val", normalize=False, random_crop=False)
+    norm = MotionDataset(built_dir, "val", random_crop=False)
+    stats = Normalizer.load(built_dir)
+    x = raw[0]["motion"].numpy()
+    np.testing.assert_allclose(norm[0]["motion"].numpy(), stats.normalize(x), rtol=1e-5, atol=1e-5)
+    train = MotionDataset(built_dir, "train", normalize=True, random_crop=False)
+    allf = torch.cat([train[i]["motion"] for i in range(len(train))])
+    assert abs(float(allf[:, 4:67].mean())) < 0.2  # ric block is centred by the train statistics
+
+
+def test_same_seed_same_epoch_same_items(built_dir: Path) -> None:
+    a, b = MotionDataset(built_dir, "train", seed=3), MotionDataset(built_dir, "train", seed=3)
+    for i in range(0, len(a), 11):
+        assert a[i]["length"] == b[i]["length"] and torch.equal(a[i]["motion"], b[i]["motion"])
+    crops = [(a[i]["length"], float(a[i]["motion"][0, 3])) for i in range(len(a))]
+    a.set_epoch(1)
+    assert crops != [(a[i]["length"], float(a[i]["motion"][0, 3])) for i in range(len(a))]
+
+
+def test_collate_pads_and_masks(built_dir: Path) -> None:
+    ds = MotionDataset(built_dir, "train")
+    batch = collate([ds[i] for i in range(6)])
+    lengths = batch["lengths"]
+    assert batch["motion"].shape == (6, int(lengths.max()), 263)
+    assert torch.equal(batch["mask"].sum(1), lengths)
+    for i in range(6):
+        assert torch.all(batch["motion"][i, lengths[i]:] == 0)
+
+
+def test_reads_a_humanml3d_folder_with_timed_captions(built_dir: Path, tmp_path: Path) -> None:
+    """A real HumanML3D folder: captions as caption#tokens#start#end, sub-spans become their own items."""
+    root = tmp_path / "HumanML3D"
+    (root / "new_joint_vecs").mkdir(parents=True)
+    (root / "texts").mkdir()
+    long_id = next(p.stem for p in sorted((built_dir / "new_joint_vecs").glob("*.npy"))
+                   if np.load(p).shape[0] >= 150)
+    shutil.copy(built_dir / "new_joint_vecs" / f"{long_id}.npy", root / "new_joint_vecs" / "000001.npy")
+    for name in ("Mean.npy", "Std.npy"):
+        shutil.copy(built_dir / name, root / name)
+    (root / "texts" / "000001.txt").write_text(
+        "a person walks.#a/DET person/NOUN walk/VERB#0.0#0.0\n"
+        "a person starts.#a/DET person/NOUN start/VERB#0.0#2.5\n"
+        "too short.#too/ADV short/ADJ#1.0#2.0\n"
+    )
+    (root / "train.txt").write_text("000001\n000002\n")  # 000002 has no files: skipped, as HumanML3D does
+    assert read_captions(root / "texts" / "000001.txt")[1] == ("a person starts.", 0.0, 2.5)
+    ds = MotionDataset(root, "train", random_crop=False, normalize=False)
+    by_id = {item.id: item for item in ds.items}
+    assert set(by_id) == {"000001", "000001#1"}
+    assert by_id["000001#1"].features.shape[0] == 50
+    assert by_id["000001"].captions == ["a person walks."]
+
+
+def test_clear_errors(tmp_path: Path) -> None:
+    with pytest.raises(PhysmotionError, match="no such dataset folder"):
+        MotionDataset(tmp_path / "nope")
+    with pytest.raises(PhysmotionError, match="no split file"):
+        MotionDataset(tmp_path)

@@ -1,0 +1,17 @@
+from pathlib import Path
+
+import pytest
+
+from physmotion.data.stats import dataset_stats
+
+pytestmark = pytest.mark.slow
+
+
+def test_stats_count_what_the_build_wrote(built_dir: Path, built) -> None:
+    stats = dataset_stats(built_dir)
+    assert stats.items == built.num_items
+    # minutes include mirrored copies, the build report does not
+    assert stats.total_minutes == pytest.approx(2 * built.minutes, rel=1e-6)
+    assert stats.vocabulary["walk"] > 0 and stats.vocabulary["person"] > 0
+    assert stats.licences.keys() == {"NC", "open"}
+    assert stats.captions >= sum(stats.items.values())

@@ -1,0 +1,79 @@
+"""The command line, run as a user runs it: a subprocess, its exit code, stdout/stderr and files."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from physmotion.motion import Motion
+
+BANDAI_WALK = "bandai/Bandai-Namco-Research-Motiondataset-2/data/dataset-2_walk_normal_001.bvh"
+
+
+def run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "physmotion.cli", *map(str, args)],
+                          capture_output=True, text=True, timeout=600)
+
+
+def _bad_bvh_files(mocap_dir: Path, tmp: Path) -> dict[str, Path]:
+    text = (mocap_dir / BANDAI_WALK).read_text()
+    head, motion = text.split("MOTION", 1)
+    lines = motion.strip().splitlines()
+    files = {
+        "missing": tmp / "does_not_exist.bvh",
+        "truncated": tmp / "truncated.bvh",
+        "not_bvh": tmp / "notes.bvh",
+        "zero_frames": tmp / "zero.bvh",
+        "nan": tmp / "nan.bvh",
+    }
+    files["truncated"].write_text(head + "MOTION\n" + "\n".join(lines[: len(lines) // 2]) + " 1.0 2.")
+    files["not_bvh"].write_text("This is a shopping list.\nmilk\neggs\n")
+    files["zero_frames"].write_text(head + "MOTION\nFrames: 0\nFrame Time: 0.0333333\n")
+    body = lines[3].split()
+    body[5] = "nan"
+    files["nan"].write_text(head + "MOTION\n" + "\n".join(lines[:3] + [" ".join(body)] + lines[4:]) + "\n")
+    return files
+
+
+@pytest.mark.parametrize("case", ["missing", "truncated", "not_bvh", "zero_frames", "nan"])
+def test_bad_input_is_one_line_no_traceback_no_output(case: str, mocap_dir: Path, tmp_path: Path) -> None:
+    bad = _bad_bvh_files(mocap_dir, tmp_path)[case]
+    out = tmp_path / "out" / "motion.npz"
+    res = run("import", bad, "-o", out, "--rig", "bandai", "--fps", "30")
+    assert res.returncode == 1
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), res.stderr
+    assert "Traceback" not in res.stderr
+    assert not out.exists()
+    leftovers = list((tmp_path / "out").iterdir()) if (tmp_path / "out").exists() else []
+    assert leftovers == []
+
+
+def test_import_then_export_bvh_then_import_again(mocap_dir: Path, tmp_path: Path) -> None:
+    npz, bvh, again = tmp_path / "walk.npz", tmp_path / "walk.bvh", tmp_path / "again.npz"
+    assert run("import", mocap_dir / BANDAI_WALK, "-o", npz, "--rig", "bandai", "--fps", "30").returncode == 0
+    res = run("export", npz, "-o", bvh)
+    assert res.returncode == 0, res.stderr
+    assert run("import", bvh, "-o", again, "--rig", "smpl22").returncode == 0
+    a, b = Motion.load(npz), Motion.load(again)
+    assert a.num_frames == b.num_frames
+    err = np.linalg.norm(a.joints - b.joints, axis=-1)
+    assert err.max() < 1e-3, err.max()
+
+
+def test_data_build_and_stats(mocap_dir: Path, tmp_path: Path) -> None:
+    out = tmp_path / "cmu"
+    res = run("data", "build", "--source", mocap_dir, "--out", out, "--exclude-license", "NC")
+    assert res.returncode == 0, res.stderr
+    assert "built" in res.stdout and (out / "Mean.npy").is_file()
+    res = run("data", "stats", out)
+    assert res.returncode == 0, res.stderr
+    assert "train" in res.stdout and "vocabulary" in res.stdout and "walk" in res.stdout
+
+
+def test_data_stats_on_a_missing_folder(tmp_path: Path) -> None:
+    res = run("data", "stats", tmp_path / "nothing")
+    assert res.returncode == 1 and res.stderr.strip().count("\n") == 0
+    assert "no such dataset folder" in res.stderr

@@ -1,0 +1,50 @@
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from physmotion.errors import MotionFormatError, ShapeError
+from physmotion.motion import Motion, write_atomic
+from physmotion.skeleton import rest_joints
+
+
+def _standing(frames: int = 10) -> np.ndarray:
+    return np.repeat(rest_joints()[None], frames, 0)
+
+
+def test_save_load_round_trip(tmp_path: Path) -> None:
+    m = Motion(_standing(), fps=20, texts=["a person stands", "stands still"], licence_tag="NC", source="x")
+    m = m.with_rotations()
+    m.save(tmp_path / "m.npz")
+    back = Motion.load(tmp_path / "m.npz")
+    np.testing.assert_array_equal(back.joints, m.joints)
+    np.testing.assert_array_equal(back.rotations, m.rotations)
+    assert (back.texts, back.licence_tag, back.fps, back.source) == (m.texts, "NC", 20, "x")
+
+
+@pytest.mark.parametrize(
+    "joints, message",
+    [(np.zeros((5, 21, 3)), "shape"), (np.zeros((0, 22, 3)), "zero frames"),
+     (np.full((3, 22, 3), np.nan), "NaN")],
+)  # fmt: skip
+def test_bad_joints_are_refused(joints: np.ndarray, message: str) -> None:
+    with pytest.raises(ShapeError, match=message):
+        Motion(joints)
+
+
+def test_load_errors_are_one_line(tmp_path: Path) -> None:
+    (tmp_path / "junk.npz").write_bytes(b"not a zip at all")
+    for path in (tmp_path / "missing.npz", tmp_path / "junk.npz"):
+        with pytest.raises(MotionFormatError) as err:
+            Motion.load(path)
+        assert "\n" not in str(err.value)
+
+
+def test_write_atomic_leaves_nothing_on_failure(tmp_path: Path) -> None:
+    def fail(f: object) -> None:
+        f.write(b"half")  # type: ignore[attr-defined]
+        raise RuntimeError("disk full")
+
+    with pytest.raises(RuntimeError):
+        write_atomic(tmp_path / "out.bin", fail)
+    assert list(tmp_path.iterdir()) == []
