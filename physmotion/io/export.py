@@ -1,0 +1,50 @@
+"""Export a Motion: BVH on the 22-joint rig (for Blender and other tools) and our .npz."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from physmotion.errors import PhysmotionError
+from physmotion.io.bvh import WRITE_ORDER, write_bvh
+from physmotion.io.rigs import RigMotion
+from physmotion.motion import Motion
+from physmotion.skeleton import JOINT_NAMES, PARENTS, inverse_kinematics, offsets_from_joints
+
+
+def save_bvh(motion: Motion, path: str | Path, *, order: str = WRITE_ORDER) -> None:
+    """Write ``motion`` as BVH on the 22-joint SMPL rig, atomically.
+
+    Joints and hierarchy: :data:`physmotion.skeleton.JOINT_NAMES` / ``PARENTS``; offsets from
+    :func:`skeleton.offsets_from_joints` (T-pose rest), local rotations from
+    :func:`skeleton.inverse_kinematics` written as intrinsic Euler angles in ``order`` (default
+    ``YZX``: see :data:`physmotion.io.bvh.WRITE_ORDER`). Units are metres and Y is up, so Blender's
+    default BVH import (forward -Z, up Y, scale 1) gives a body of the right size standing upright;
+    the frame time is ``1 / motion.fps``. Re-import with ``import_clip(path, rig="smpl22")``.
+    """
+    joints = np.asarray(motion.joints, dtype=np.float64)
+    offsets = offsets_from_joints(joints)
+    rotations, root = inverse_kinematics(joints, offsets)
+    translations = np.broadcast_to(offsets, joints.shape).copy()
+    translations[:, 0] = root
+    rig = RigMotion(
+        names=JOINT_NAMES, parents=np.array(PARENTS), rotations=rotations, translations=translations
+    )
+    write_bvh(path, rig, motion.fps, order=order)
+
+
+def save_npz(motion: Motion, path: str | Path) -> None:
+    """Write ``motion`` as our .npz (joints, rotations, offsets, fps, texts, licence), atomically."""
+    motion.save(path)
+
+
+def save_motion(motion: Motion, path: str | Path) -> None:
+    """Write ``motion`` in the format its suffix names: ``.bvh`` or ``.npz``."""
+    suffix = Path(path).suffix.lower()
+    if suffix == ".bvh":
+        save_bvh(motion, path)
+    elif suffix == ".npz":
+        save_npz(motion, path)
+    else:
+        raise PhysmotionError(f"{path}: unknown output format {suffix or '(none)'!r}: use .bvh or .npz")
