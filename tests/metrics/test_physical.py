@@ -459,8 +459,12 @@ def test_real_walking_is_nearly_physical(mocap_root: Path) -> None:
     infos = {info.clip: info for info in load_manifest(mocap_root)}
     for clip in REAL_WALKS:
         motion = import_clip(infos[clip])
-        m = physical_metrics(motion.joints, fps=motion.fps)
+        # Data puts its floor at the lowest joint (HumanML3D); the body surface puts soles under the
+        # toe joints, so raise the data by the default sole depth before asking about penetration.
+        joints = motion.joints + np.array([0.0, DEFAULT_BODY.sole_below_toe, 0.0], dtype=np.float32)
+        m = physical_metrics(joints, fps=motion.fps)
         print(clip, {k: round(v, 3) for k, v in m.items()})
-        assert m["penetrate"] < 15.0 and m["float"] < 15.0, clip  # mm
-        assert m["skate"] < 5.0 and m["skate_ratio"] < 0.3, clip
+        assert m["penetrate"] < 10.0 and m["float"] < 15.0, clip  # mm (CMU feet sit ~1 cm higher)
+        # Real capture slides a little (CMU 02_01: 6.7 mm per frame in the data itself).
+        assert m["skate"] < 8.0 and m["skate_ratio"] < 0.3, clip
         assert 0.3 < m["speed"] < 3.0, clip

@@ -1,0 +1,145 @@
+"""The simulation core: run a controller along a reference, one motion or many at once.
+
+One closed-loop episode is a Python loop over control steps (30 Hz) of ``substeps`` ``mj_step`` calls
+(120 Hz). Batches run episodes on a thread pool, one ``MjData`` per episode: ``mj_step`` releases the
+GIL, and ``mujoco.rollout`` cannot be used because the controller is closed-loop (the root PD reads the
+state), see shared/notes/tracking-controller.md §4. ``bench/physics.py`` compares the two.
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from physmotion.physics.humanoid import HumanoidConfig, layout
+from physmotion.physics.tracking import STANDARD_GRAVITY, Controller, Reference
+from physmotion.skeleton import FOOT_JOINTS, JOINT_NAMES
+
+
+@dataclass
+class Rollout:
+    """What one episode produced, at control steps 0..N-1 (step 0 is the reset state).
+
+    qpos: (N, 70); mpjpe: (N,) metres, mean distance of the 22 bodies to the reference;
+    residual_force, residual_torque: (N,) root residual used, fractions of W and W x 1 m (0 at step 0);
+    contacts: (N, 4) bool, left ankle, left foot, right ankle, right foot touching the floor;
+    failed_at: first control step whose MPJPE exceeded the failure threshold, or None.
+    """
+
+    qpos: np.ndarray
+    mpjpe: np.ndarray
+    residual_force: np.ndarray
+    residual_torque: np.ndarray
+    contacts: np.ndarray
+    failed_at: int | None
+
+
+def _lowest_point(model, data) -> float:
+    """Height (m, MuJoCo z) of the lowest point of any body geom (bounding spheres of boxes are too
+    crude for a foot, so boxes use their corners)."""
+    import mujoco
+
+    low = np.inf
+    for g in range(1, model.ngeom):
+        size, pos, mat = model.geom_size[g], data.geom_xpos[g], data.geom_xmat[g].reshape(3, 3)
+        t = model.geom_type[g]
+        if t == mujoco.mjtGeom.mjGEOM_BOX:
+            signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)])
+            low = min(low, float(np.min(pos[2] + (signs * size) @ mat[2])))
+        elif t == mujoco.mjtGeom.mjGEOM_CAPSULE:
+            low = min(low, float(pos[2] - abs(mat[2, 2]) * size[1] - size[0]))
+        else:  # sphere
+            low = min(low, float(pos[2] - size[0]))
+    return low
+
+
+def reset_state(model, data, ref: Reference) -> None:
+    """Put the humanoid on the reference's first frame, lifted out of the floor if it starts inside it."""
+    import mujoco
+
+    mujoco.mj_resetData(model, data)
+    data.qpos[:] = ref.qpos[0]
+    data.qvel[:] = ref.qvel[0]
+    mujoco.mj_kinematics(model, data)
+    low = _lowest_point(model, data)
+    if low < 0.0:
+        data.qpos[2] -= low
+    mujoco.mj_forward(model, data)
+
+
+def simulate(
+    model,
+    ref: Reference,
+    controller: Controller,
+    config: HumanoidConfig | None = None,
+    fail_mpjpe: float = 0.5,
+) -> Rollout:
+    """Run ``controller`` along ``ref`` (at the control rate of ``config``) from the reference's start.
+
+    The episode ends early when the MPJPE to the reference exceeds ``fail_mpjpe`` (Morph's 0.5 m);
+    the remaining steps then repeat the last state and ``failed_at`` is set.
+    """
+    import mujoco
+
+    cfg = config or HumanoidConfig()
+    data = mujoco.MjData(model)
+    lay = layout(model)
+    foot_bodies = {int(lay.body_ids[j]): i for i, j in enumerate(FOOT_JOINTS)}
+    n = len(ref.qpos)
+    qpos = np.zeros((n, model.nq))
+    mpjpe = np.zeros(n)
+    res_f, res_t = np.zeros(n), np.zeros(n)
+    contacts = np.zeros((n, 4), dtype=bool)
+    weight = float(model.body_subtreemass[0]) * STANDARD_GRAVITY
+    reset_state(model, data, ref)
+    failed_at = None
+    for k in range(n):
+        qpos[k] = data.qpos
+        mpjpe[k] = float(np.mean(np.linalg.norm(data.xpos[lay.body_ids] - ref.joints_mj[k], axis=-1)))
+        for c in data.contact[: data.ncon]:
+            for g1, g2 in ((c.geom1, c.geom2), (c.geom2, c.geom1)):
+                if g1 == 0:
+                    side = foot_bodies.get(int(model.geom_bodyid[g2]))
+                    if side is not None:
+                        contacts[k, side] = True
+        if mpjpe[k] > fail_mpjpe:
+            failed_at = k
+            qpos[k:] = data.qpos
+            mpjpe[k:] = mpjpe[k]
+            break
+        if k == n - 1:
+            break
+        ctrl, qfrc = controller.act(data, ref, k)
+        data.ctrl[:] = ctrl
+        data.qfrc_applied[:] = qfrc
+        for _ in range(cfg.substeps):
+            mujoco.mj_step(model, data)
+        # The root residual actually applied: the controller's wrench plus the root dofs' damping.
+        root = data.qfrc_applied[:6] + data.qfrc_damper[:6]
+        res_f[k + 1] = np.linalg.norm(root[:3]) / weight
+        res_t[k + 1] = np.linalg.norm(root[3:6]) / weight
+    return Rollout(qpos, mpjpe, res_f, res_t, contacts, failed_at)
+
+
+def simulate_batch(
+    jobs: list[tuple[object, Reference, Controller]],
+    config: HumanoidConfig | None = None,
+    fail_mpjpe: float = 0.5,
+    threads: int = 0,
+) -> list[Rollout]:
+    """:func:`simulate` for many (model, reference, controller) triples on a thread pool.
+
+    Results are in input order and equal the one-by-one results exactly (each episode has its own
+    MjData; nothing is shared but read-only models).
+    """
+    threads = threads or os.cpu_count() or 1
+    if threads == 1 or len(jobs) == 1:
+        return [simulate(m, r, c, config, fail_mpjpe) for m, r, c in jobs]
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        return list(pool.map(lambda job: simulate(*job, config, fail_mpjpe), jobs))
+
+
+__all__ = ["JOINT_NAMES", "Rollout", "reset_state", "simulate", "simulate_batch"]
