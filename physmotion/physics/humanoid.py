@@ -35,7 +35,7 @@ import numpy as np
 
 from physmotion.errors import ShapeError
 from physmotion.physics.frames import to_mujoco
-from physmotion.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, REST_OFFSETS, children
+from physmotion.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, REST_OFFSETS, children, offsets_from_joints
 
 AXES = "xyz"
 
@@ -268,6 +268,35 @@ def _side_free(name: str) -> str:
 def body_scale(offsets: np.ndarray) -> float:
     """Size of a body relative to the default one: ratio of summed bone lengths."""
     return float(np.linalg.norm(offsets, axis=-1).sum() / np.linalg.norm(REST_OFFSETS, axis=-1).sum())
+
+
+def body_from_joints(joints: np.ndarray, fps: float = 20.0) -> np.ndarray:
+    """Rest offsets (22, 3) of the humanoid that fits a motion: its bone lengths, and feet that stand flat.
+
+    joints: (T, 22, 3) metres, Y up. Bone lengths and the hip/shoulder layout come from
+    :func:`skeleton.offsets_from_joints`. The foot bone (ankle -> toe joint) is then tilted to the pitch
+    it has in the motion while the foot stands still on the floor (median over such frames), because
+    the feet's boxes are flat in the rest pose: with the default 23 degree pitch, a rig whose standing
+    foot is pitched 40 degrees (Bandai) stood the humanoid on its toe boxes with the heels in the air
+    (measured), and one pitched 12 degrees (CMU iClone) buried its heels. Without a standing frame the
+    default pitch is kept.
+    """
+    joints = np.asarray(joints, dtype=np.float64)
+    offsets = offsets_from_joints(joints)
+    for side in ("left", "right"):
+        a, f = JOINT_INDEX[f"{side}_ankle"], JOINT_INDEX[f"{side}_foot"]
+        bone = joints[:, f] - joints[:, a]
+        pitch = np.arctan2(-bone[:, 1], np.linalg.norm(bone[:, [0, 2]], axis=-1))
+        speed = np.linalg.norm(np.diff(joints[:, f], axis=0), axis=-1) * fps
+        standing = (joints[:-1, f, 1] < joints[:, f, 1].min() + 0.02) & (speed < 0.2)
+        if not standing.any():
+            continue
+        p = float(np.median(pitch[:-1][standing]))
+        rest = offsets[f]
+        flat = np.array([rest[0], 0.0, rest[2]])
+        flat /= np.linalg.norm(flat)
+        offsets[f] = np.linalg.norm(rest) * (math.cos(p) * flat + np.array([0.0, -math.sin(p), 0.0]))
+    return offsets
 
 
 def _sole_depth(offsets: np.ndarray, side: str, cfg: HumanoidConfig, s: float) -> float:

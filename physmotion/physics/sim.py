@@ -16,7 +16,7 @@ import numpy as np
 
 from physmotion.physics.humanoid import HumanoidConfig, layout
 from physmotion.physics.tracking import STANDARD_GRAVITY, Controller, Reference
-from physmotion.skeleton import FOOT_JOINTS, JOINT_NAMES
+from physmotion.skeleton import FOOT_JOINTS
 
 
 @dataclass
@@ -141,5 +141,3 @@ def simulate_batch(
     with ThreadPoolExecutor(max_workers=threads) as pool:
         return list(pool.map(lambda job: simulate(*job, config, fail_mpjpe), jobs))
 
-
-__all__ = ["JOINT_NAMES", "Rollout", "reset_state", "simulate", "simulate_batch"]

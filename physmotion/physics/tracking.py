@@ -26,7 +26,7 @@ from typing import Protocol
 import numpy as np
 from scipy.optimize import nnls
 
-from physmotion.physics.humanoid import JOINT_GROUP, HumanoidConfig, layout
+from physmotion.physics.humanoid import layout
 from physmotion.physics.retarget import qvel_from_qpos
 from physmotion.skeleton import JOINT_NAMES
 
@@ -119,7 +119,7 @@ def prepare_reference(model, qpos: np.ndarray, dt: float, config: TrackingConfig
             if not cfg.feedforward:
                 continue
             t = data.qfrc_inverse.copy()
-            cols, jac_list = [], []
+            jac_list = []
             for g, body, local in corners:
                 pts = data.geom_xpos[g] + local @ data.geom_xmat[g].reshape(3, 3).T
                 for p in pts[pts[:, 2] < cfg.contact_height]:
@@ -205,11 +205,3 @@ def _rotate_local_to_world(quat: np.ndarray, v: np.ndarray) -> np.ndarray:
 def _clip_norm(v: np.ndarray, bound: float) -> np.ndarray:
     n = float(np.linalg.norm(v))
     return v if n <= bound or n == 0.0 else v * (bound / n)
-
-
-def actuator_groups(model) -> list[str]:
-    """The joint group (hip, knee, ...) of each actuator, for reports."""
-    return [JOINT_GROUP[model.actuator(i).name.rsplit("_", 1)[0]] for i in range(model.nu)]
-
-
-__all__ = ["Controller", "HumanoidConfig", "ModelBasedTracker", "Reference", "TrackingConfig", "prepare_reference"]
