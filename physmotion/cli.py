@@ -102,6 +102,19 @@ def export_motion(
     console.print(f"wrote {out}", highlight=False)
 
 
+@app.command("metrics")
+def metrics(paths: list[Path] = typer.Argument(..., help="Motion .npz files (joints, fps).")) -> None:
+    """Print the physical metrics (PhysDiff, EDGE/Morph, BioMoDiffuse) of one or more motions."""
+    from physmotion.metrics import format_table, physical_metrics
+    from physmotion.motion import Motion
+
+    results = {}
+    for path in paths:
+        motion = Motion.load(path)
+        results[path.name] = physical_metrics(motion.joints, fps=motion.fps)
+    console.print(format_table(results, title="physical metrics"))
+
+
 def main() -> None:
     """Entry point of the console script: user errors become one line, never a traceback."""
     try:

@@ -77,3 +77,17 @@ def test_data_stats_on_a_missing_folder(tmp_path: Path) -> None:
     res = run("data", "stats", tmp_path / "nothing")
     assert res.returncode == 1 and res.stderr.strip().count("\n") == 0
     assert "no such dataset folder" in res.stderr
+
+
+def test_metrics_prints_a_table_and_refuses_bad_files(mocap_dir: Path, tmp_path: Path) -> None:
+    npz = tmp_path / "walk.npz"
+    assert run("import", mocap_dir / BANDAI_WALK, "-o", npz).returncode == 0
+    lifted = Motion.load(npz)
+    lifted.joints[:, :, 1] += 0.1
+    lifted.save(tmp_path / "lifted.npz")
+    res = run("metrics", npz, tmp_path / "lifted.npz")
+    assert res.returncode == 0, res.stderr
+    assert "penetrate" in res.stdout and "lifted.npz" in res.stdout and "PhysDiff" in res.stdout
+    (tmp_path / "junk.npz").write_text("junk")
+    res = run("metrics", tmp_path / "junk.npz")
+    assert res.returncode == 1 and res.stderr.startswith("error: ") and res.stderr.count("\n") == 1
