@@ -102,6 +102,28 @@ def export_motion(
     console.print(f"wrote {out}", highlight=False)
 
 
+@app.command("project")
+def project_motion(
+    path: Path = typer.Argument(..., help="A motion .npz (joints at any fps)."),
+    out: Path = typer.Option(..., "-o", "--out", help="Output .npz with the projected motion."),
+) -> None:
+    """Physics projection (PhysDiff's P): imitate the motion with the simulated humanoid."""
+    from dataclasses import replace
+
+    from physmotion.motion import Motion
+    from physmotion.physics.projection import project
+
+    motion = Motion.load(path)
+    result = project(motion.joints, motion.fps)
+    replace(motion, joints=result.joints, rotations=None, offsets=None).save(out)
+    kept = "simulation kept" if result.selected else "tracking failed: input kept (flagged)"
+    console.print(
+        f"wrote {out}: {kept}; MPJPE mean {1000 * result.mpjpe.mean():.0f} mm, "
+        f"root residual mean {result.residual_force.mean():.2f} W",
+        highlight=False,
+    )
+
+
 @app.command("metrics")
 def metrics(paths: list[Path] = typer.Argument(..., help="Motion .npz files (joints, fps).")) -> None:
     """Print the physical metrics (PhysDiff, EDGE/Morph, BioMoDiffuse) of one or more motions."""

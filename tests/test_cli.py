@@ -91,3 +91,19 @@ def test_metrics_prints_a_table_and_refuses_bad_files(mocap_dir: Path, tmp_path:
     (tmp_path / "junk.npz").write_text("junk")
     res = run("metrics", tmp_path / "junk.npz")
     assert res.returncode == 1 and res.stderr.startswith("error: ") and res.stderr.count("\n") == 1
+
+
+def test_project_writes_the_simulated_motion(mocap_dir: Path, tmp_path: Path) -> None:
+    npz, out = tmp_path / "walk.npz", tmp_path / "projected.npz"
+    assert run("import", mocap_dir / BANDAI_WALK, "-o", npz).returncode == 0
+    short = Motion.load(npz)
+    short.joints = short.joints[:60]
+    short.save(npz)
+    res = run("project", npz, "-o", out)
+    assert res.returncode == 0, res.stderr
+    assert "simulation kept" in res.stdout
+    projected = Motion.load(out)
+    assert projected.joints.shape == (60, 22, 3) and not np.array_equal(projected.joints, short.joints)
+    assert projected.licence_tag == short.licence_tag
+    res = run("project", tmp_path / "missing.npz", "-o", tmp_path / "x.npz")
+    assert res.returncode == 1 and res.stderr.startswith("error: ") and not (tmp_path / "x.npz").exists()

@@ -115,12 +115,13 @@ def simulate(
         ctrl, qfrc = controller.act(data, ref, k)
         data.ctrl[:] = ctrl
         data.qfrc_applied[:] = qfrc
-        for _ in range(cfg.substeps):
+        force = torque = 0.0
+        for s in range(cfg.substeps):
+            data.qfrc_applied[:6] = qfrc[:6] + controller.residual(data, ref, k + (s + 1) / cfg.substeps)
+            force += np.linalg.norm(data.qfrc_applied[:3]) / weight / cfg.substeps
+            torque += np.linalg.norm(data.qfrc_applied[3:6]) / weight / cfg.substeps
             mujoco.mj_step(model, data)
-        # The root residual actually applied: the controller's wrench plus the root dofs' damping.
-        root = data.qfrc_applied[:6] + data.qfrc_damper[:6]
-        res_f[k + 1] = np.linalg.norm(root[:3]) / weight
-        res_t[k + 1] = np.linalg.norm(root[3:6]) / weight
+        res_f[k + 1], res_t[k + 1] = force, torque
     return Rollout(qpos, mpjpe, res_f, res_t, contacts, failed_at)
 
 

@@ -39,6 +39,7 @@ class TrackingConfig:
 
     residual_force: float = 0.1  # max |F| on the root as a fraction of W
     residual_torque: float = 0.1  # max |tau| on the root as a fraction of W x 1 m
+    residual_lift: float = 1.0  # max upward force on the root as a fraction of W (below 1: cannot float)
     root_kp: float = 2000.0  # N/m, pelvis position PD (before clipping)
     root_kd: float = 200.0  # N s/m
     root_rot_kp: float = 600.0  # N m/rad
@@ -68,7 +69,11 @@ class Controller(Protocol):
     """What a tracker (model-based or learned) provides to the simulation loop."""
 
     def act(self, data, ref: Reference, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """Controls for the step from control step k to k+1: (ctrl (nu,), qfrc_applied (nv,))."""
+        """Controls held over the control step k -> k+1: (ctrl (nu,), qfrc_applied (nv,))."""
+        ...
+
+    def residual(self, data, ref: Reference, t: float) -> np.ndarray:
+        """Root wrench (6,) for the simulation step that ends at control time t (k + fraction)."""
         ...
 
 
@@ -158,40 +163,72 @@ def _quat_error(q_ref: np.ndarray, q: np.ndarray) -> np.ndarray:
 class ModelBasedTracker:
     """PD + inverse-dynamics feed-forward + bounded residual root wrench (see the module docstring).
 
-    The root PD's damping is put on the model as ``dof_damping`` of the six root dofs, so MuJoCo
-    integrates it implicitly: computed explicitly at 30 Hz it made the light pelvis oscillate and blow
-    up (measured: a floating body with a 30 degree root error diverged in 0.3 s; implicit, it settles).
-    The explicit part (feed-forward leftover + stiffness + ``kd * v_ref``) is what the bound clips; the
-    simulation reports the total residual actually applied, damping included.
+    Joint targets change at the control rate; the root residual is a PD recomputed at every
+    simulation step toward the reference interpolated in time. It must not live in the model as
+    implicit ``dof_damping``: that damps the *absolute* root velocity, and once the bound clipped the
+    ``kd * v_ref`` meant to cancel it, a 1.2 m/s walk was braked by ~1000 N and fell behind
+    (measured). Explicit, the rotational damping must stay small: the pelvis alone is light
+    (stability needs kd * dt / I < 2).
     """
 
     def __init__(self, model, config: TrackingConfig | None = None) -> None:
         self.model = model
         self.config = config or TrackingConfig()
-        weight = float(model.body_subtreemass[0]) * STANDARD_GRAVITY
-        self.max_force = self.config.residual_force * weight
-        self.max_torque = self.config.residual_torque * weight * 1.0
-        self.weight = weight
-        model.dof_damping[:3] = self.config.root_kd
-        model.dof_damping[3:6] = self.config.root_rot_kd
-        self.kv = np.zeros(model.nv)
+        self.weight = float(model.body_subtreemass[0]) * STANDARD_GRAVITY
+        self.max_force = self.config.residual_force * self.weight
+        self.max_torque = self.config.residual_torque * self.weight * 1.0
+        self.max_lift = self.config.residual_lift * self.weight
         # Position actuators in qpos order: actuator i drives dof 6 + i (see humanoid.build_mjcf).
-        self.kv[6:] = -model.actuator_biasprm[:, 2]
+        self.kp = model.actuator_gainprm[:, 0]
+        self.kv = -model.actuator_biasprm[:, 2]
 
     def act(self, data, ref: Reference, k: int) -> tuple[np.ndarray, np.ndarray]:
-        cfg = self.config
+        """Actuator targets for the control step k -> k+1 (ctrl (nu,); qfrc (nv,) is zero here).
+
+        Velocity and torque feed-forward go in through the targets, so the actuators' force range
+        clips PD and feed-forward together: added outside as qfrc_applied, an ankle's kv * qvel_ref
+        alone reached 1600 N m and spun the 1 kg foot once the PD part saturated (measured).
+        """
         nxt = min(k + 1, len(ref.qpos) - 1)
-        ctrl = ref.qpos[nxt, 7:].copy()
-        qfrc = ref.tau_ff[k].copy()
-        qfrc[6:] += self.kv[6:] * ref.qvel[nxt, 6:]
+        ctrl = ref.qpos[nxt, 7:] + (self.kv * ref.qvel[nxt, 6:] + ref.tau_ff[k, 6:]) / self.kp
+        return ctrl, np.zeros(self.model.nv)
+
+    def residual(self, data, ref: Reference, t: float) -> np.ndarray:
+        """Root wrench (6,) for the simulation step ending at control time t (MuJoCo free-joint
+        convention: world force, local torque), clipped to the configured bounds."""
+        cfg = self.config
+        k = min(int(np.floor(t)), len(ref.qpos) - 2)
+        a = t - k
+        pos_ref = (1 - a) * ref.qpos[k, :3] + a * ref.qpos[k + 1, :3]
+        vel_ref = (1 - a) * ref.qvel[k, :3] + a * ref.qvel[k + 1, :3]
+        quat_ref = _slerp(ref.qpos[k, 3:7], ref.qpos[k + 1, 3:7], a)
+        omega_ref = _rotate_local_to_world(quat_ref, (1 - a) * ref.qvel[k, 3:6] + a * ref.qvel[k + 1, 3:6])
         rot = data.xmat[1].reshape(3, 3)  # pelvis orientation (body 1 is the root)
-        force = qfrc[:3] + cfg.root_kp * (ref.qpos[nxt, :3] - data.qpos[:3]) + cfg.root_kd * ref.qvel[nxt, :3]
-        ang_err = _quat_error(ref.qpos[nxt, 3:7], data.qpos[3:7])  # world frame
-        omega_ref = _rotate_local_to_world(ref.qpos[nxt, 3:7], ref.qvel[nxt, 3:6])
-        torque = rot @ qfrc[3:6] + cfg.root_rot_kp * ang_err + cfg.root_rot_kd * omega_ref
-        qfrc[:3] = _clip_norm(force, self.max_force)
-        qfrc[3:6] = rot.T @ _clip_norm(torque, self.max_torque)
-        return ctrl, qfrc
+        ff = ref.tau_ff[min(k, len(ref.tau_ff) - 1), :6]
+        force = ff[:3] + cfg.root_kp * (pos_ref - data.qpos[:3]) + cfg.root_kd * (vel_ref - data.qvel[:3])
+        omega = rot @ data.qvel[3:6]
+        torque = (rot @ ff[3:6] + cfg.root_rot_kp * _quat_error(quat_ref, data.qpos[3:7])
+                  + cfg.root_rot_kd * (omega_ref - omega))  # fmt: skip
+        force = _clip_norm(force, self.max_force)
+        force[2] = min(force[2], self.max_lift)  # MuJoCo z is up
+        return np.concatenate([force, rot.T @ _clip_norm(torque, self.max_torque)])
+
+
+def _slerp(q0: np.ndarray, q1: np.ndarray, a: float) -> np.ndarray:
+    """Quaternion (wxyz) a of the way from q0 to q1 (MuJoCo's quaternion helpers)."""
+    import mujoco
+
+    dq = np.zeros(4)
+    inv = np.zeros(4)
+    mujoco.mju_negQuat(inv, q0)
+    mujoco.mju_mulQuat(dq, q1, inv)  # world-frame rotation from q0 to q1
+    vel = np.zeros(3)
+    mujoco.mju_quat2Vel(vel, dq, 1.0)
+    step = np.zeros(4)
+    mujoco.mju_axisAngle2Quat(step, vel / (np.linalg.norm(vel) or 1.0), a * np.linalg.norm(vel))
+    out = np.zeros(4)
+    mujoco.mju_mulQuat(out, step, q0)
+    return out
 
 
 def _rotate_local_to_world(quat: np.ndarray, v: np.ndarray) -> np.ndarray:
