@@ -86,6 +86,8 @@ def test_commanded_residual_respects_its_bound(real_walk: np.ndarray, bound: flo
     data = mujoco.MjData(model)
     data.qpos[:] = ref.qpos[0] - np.r_[0, 0, 0.2, np.zeros(model.nq - 3)]
     mujoco.mj_forward(model, data)
-    _, qfrc = tracker.act(data, ref, 0)
-    assert np.linalg.norm(qfrc[:3]) == pytest.approx(bound * tracker.weight, rel=1e-6)
-    assert np.linalg.norm(qfrc[3:6]) <= bound * tracker.weight + 1e-9
+    wrench = tracker.residual(data, ref, 0.5)
+    assert np.linalg.norm(wrench[:3]) == pytest.approx(bound * tracker.weight, rel=1e-6)
+    assert np.linalg.norm(wrench[3:6]) <= bound * tracker.weight + 1e-9
+    capped = ModelBasedTracker(model, TrackingConfig(residual_force=bound, residual_lift=0.01))
+    assert capped.residual(data, ref, 0.5)[2] == pytest.approx(0.01 * capped.weight)  # upward cap
