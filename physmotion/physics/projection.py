@@ -49,7 +49,9 @@ class ProjectionConfig:
     humanoid: HumanoidConfig = field(default_factory=_default_humanoid)
     tracking: TrackingConfig = field(default_factory=_default_tracking)
     tau: float = 0.5  # m: Morph's imitation selection keeps the simulation while MPJPE < tau
-    threads: int = 0  # 0: one per core
+    # 1: the root residual is Python at the simulation rate and holds the GIL, so two threads were
+    # slower than one (bench/physics.py: 1.55 vs 2.03 motions/s at batch 64). 0: one per core.
+    threads: int = 1
 
 
 @dataclass
