@@ -125,16 +125,28 @@ def project_motion(
 
 
 @app.command("metrics")
-def metrics(paths: list[Path] = typer.Argument(..., help="Motion .npz files (joints, fps).")) -> None:
+def metrics(
+    paths: list[Path] = typer.Argument(..., help="Motion .npz files (joints, fps)."),
+    surface: str = typer.Option(
+        "humanoid", help="Body surface for Penetrate/Float/Skate: 'humanoid' (MuJoCo geometry posed on "
+        "the joints) or 'joints' (a light model built from the joints alone)."),
+) -> None:
     """Print the physical metrics (PhysDiff, EDGE/Morph, BioMoDiffuse) of one or more motions."""
     from physmotion.metrics import format_table, physical_metrics
     from physmotion.motion import Motion
 
+    if surface not in ("humanoid", "joints"):
+        raise PhysmotionError(f"--surface must be 'humanoid' or 'joints', got {surface!r}")
     results = {}
     for path in paths:
         motion = Motion.load(path)
-        results[path.name] = physical_metrics(motion.joints, fps=motion.fps)
-    console.print(format_table(results, title="physical metrics"))
+        body = None
+        if surface == "humanoid":
+            from physmotion.physics.surface import HumanoidSurface
+
+            body = HumanoidSurface()
+        results[path.name] = physical_metrics(motion.joints, fps=motion.fps, body=body)
+    console.print(format_table(results, title=f"physical metrics ({surface} surface)"))
 
 
 def main() -> None:

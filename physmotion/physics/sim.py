@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from physmotion.physics.humanoid import HumanoidConfig, layout
+from physmotion.physics.surface import lowest_point
 from physmotion.physics.tracking import STANDARD_GRAVITY, Controller, Reference
 from physmotion.skeleton import FOOT_JOINTS
 
@@ -37,25 +38,6 @@ class Rollout:
     failed_at: int | None
 
 
-def _lowest_point(model, data) -> float:
-    """Height (m, MuJoCo z) of the lowest point of any body geom (bounding spheres of boxes are too
-    crude for a foot, so boxes use their corners)."""
-    import mujoco
-
-    low = np.inf
-    for g in range(1, model.ngeom):
-        size, pos, mat = model.geom_size[g], data.geom_xpos[g], data.geom_xmat[g].reshape(3, 3)
-        t = model.geom_type[g]
-        if t == mujoco.mjtGeom.mjGEOM_BOX:
-            signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)])
-            low = min(low, float(np.min(pos[2] + (signs * size) @ mat[2])))
-        elif t == mujoco.mjtGeom.mjGEOM_CAPSULE:
-            low = min(low, float(pos[2] - abs(mat[2, 2]) * size[1] - size[0]))
-        else:  # sphere
-            low = min(low, float(pos[2] - size[0]))
-    return low
-
-
 def reset_state(model, data, ref: Reference) -> None:
     """Put the humanoid on the reference's first frame, lifted out of the floor if it starts inside it."""
     import mujoco
@@ -64,7 +46,7 @@ def reset_state(model, data, ref: Reference) -> None:
     data.qpos[:] = ref.qpos[0]
     data.qvel[:] = ref.qvel[0]
     mujoco.mj_kinematics(model, data)
-    low = _lowest_point(model, data)
+    low = lowest_point(model, data)
     if low < 0.0:
         data.qpos[2] -= low
     mujoco.mj_forward(model, data)

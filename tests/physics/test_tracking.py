@@ -12,7 +12,8 @@ import pytest
 
 from physmotion.physics.humanoid import body_from_joints, build_model, foot_lift
 from physmotion.physics.retarget import joints_to_qpos
-from physmotion.physics.sim import _lowest_point, simulate, simulate_batch
+from physmotion.physics.sim import simulate, simulate_batch
+from physmotion.physics.surface import lowest_point
 from physmotion.physics.tracking import ModelBasedTracker, TrackingConfig, prepare_reference
 from physmotion.skeleton import offsets_from_joints
 
@@ -34,7 +35,7 @@ def _heels_and_lowest(offsets: np.ndarray, joints: np.ndarray) -> tuple[float, f
     mujoco.mj_kinematics(model, data)
     heels = [data.geom_xpos[model.geom(f"{s}_ankle").id][2] - model.geom(f"{s}_ankle").size[2]
              for s in ("left", "right")]  # fmt: skip
-    return max(heels), _lowest_point(model, data)
+    return max(heels), lowest_point(model, data)
 
 
 def test_feet_of_the_motion_body_stand_flat(real_walk: np.ndarray) -> None:
@@ -91,3 +92,21 @@ def test_commanded_residual_respects_its_bound(real_walk: np.ndarray, bound: flo
     assert np.linalg.norm(wrench[3:6]) <= bound * tracker.weight + 1e-9
     capped = ModelBasedTracker(model, TrackingConfig(residual_force=bound, residual_lift=0.01))
     assert capped.residual(data, ref, 0.5)[2] == pytest.approx(0.01 * capped.weight)  # upward cap
+
+
+def test_humanoid_surface_reads_the_geoms(real_walk: np.ndarray) -> None:
+    """The metrics' body surface from MuJoCo: soles under the toe joints by the sole depth."""
+    from physmotion.metrics import physical_metrics
+    from physmotion.physics.surface import HumanoidSurface
+
+    body = body_from_joints(real_walk)
+    surface = HumanoidSurface(body)
+    low = surface.lowest_height(real_walk[:20])
+    feet = surface.foot_heights(real_walk[:20])
+    assert low.shape == (20,) and feet.shape == (20, 4)
+    assert np.all(low <= feet.min(axis=1) + 1e-9)
+    # Data convention (toe joints on the floor): the soles sink by the sole depth.
+    assert np.median(low) == pytest.approx(-foot_lift(body), abs=0.006)
+    raised = real_walk + np.array([0.0, foot_lift(body), 0.0])
+    # Real capture on our feet: a few mm of penetration remain (2.6 mm here, after the 5 mm tolerance).
+    assert physical_metrics(raised.astype(np.float32), body=surface)["penetrate"] < 5.0  # mm

@@ -1,0 +1,81 @@
+"""The humanoid's collision geometry as the body surface of the ground metrics.
+
+PhysDiff measures Penetrate and Float at the lowest SMPL mesh vertex. We have no SMPL mesh; the issue
+asks for the humanoid's collision geometry in the same pose, and that matters: the joint-only surface
+model of :mod:`physmotion.metrics.geometry` assumes the default foot, and on Bandai walks (feet pitched
+40 degrees) it put the simulated soles 13-21 mm above where MuJoCo had them (measured).
+:class:`HumanoidSurface` poses the humanoid on the joints (retargeting, no lift) and reads the geoms.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from physmotion.physics.humanoid import HumanoidConfig, body_from_joints, build_model
+from physmotion.physics.retarget import joints_to_qpos
+from physmotion.skeleton import FOOT_JOINTS, JOINT_NAMES
+
+_BOX_SIGNS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=np.float64)
+
+
+def geom_lowest(model, data, geom: int) -> float:
+    """Height (m, MuJoCo z) of the lowest point of one box, capsule or sphere geom."""
+    import mujoco
+
+    size, pos, mat = model.geom_size[geom], data.geom_xpos[geom], data.geom_xmat[geom].reshape(3, 3)
+    kind = model.geom_type[geom]
+    if kind == mujoco.mjtGeom.mjGEOM_BOX:
+        return float(np.min(pos[2] + (_BOX_SIGNS * size) @ mat[2]))
+    if kind == mujoco.mjtGeom.mjGEOM_CAPSULE:
+        return float(pos[2] - abs(mat[2, 2]) * size[1] - size[0])
+    return float(pos[2] - size[0])  # sphere
+
+
+def lowest_point(model, data) -> float:
+    """Height (m, MuJoCo z) of the lowest point of the body (every geom but the floor, geom 0)."""
+    return min(geom_lowest(model, data, g) for g in range(1, model.ngeom))
+
+
+class HumanoidSurface:
+    """A :class:`physmotion.metrics.geometry.BodySurface` read from the MuJoCo humanoid.
+
+    offsets: the body (22, 3) to pose; by default each call measures it from the joints it is given
+    (:func:`body_from_joints`). Foot patches: the ankle box (heel) and the toe box.
+    """
+
+    def __init__(self, offsets: np.ndarray | None = None, config: HumanoidConfig | None = None) -> None:
+        self.offsets, self.config = offsets, config or HumanoidConfig()
+        self._cache: tuple[int, tuple[int, ...], tuple[np.ndarray, np.ndarray]] | None = None
+
+    def _per_frame(self, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(lowest (..., T), feet (..., T, 4)) heights in metres; the metrics ask for both of the same
+        array in turn, so the last result is kept."""
+        import mujoco
+
+        key = (id(joints), np.shape(joints))
+        if self._cache is not None and self._cache[:2] == key:
+            return self._cache[2]
+
+        x = np.asarray(joints, dtype=np.float64)
+        flat = x.reshape((-1,) + x.shape[-3:])
+        lowest = np.zeros(flat.shape[:2])
+        feet = np.zeros(flat.shape[:2] + (4,))
+        for b, motion in enumerate(flat):
+            offsets = body_from_joints(motion) if self.offsets is None else self.offsets
+            model = build_model(offsets, self.config)
+            data = mujoco.MjData(model)
+            patch = [model.geom(JOINT_NAMES[j]).id for j in FOOT_JOINTS]
+            for t, q in enumerate(joints_to_qpos(motion, model, config=self.config)):
+                data.qpos[:] = q
+                mujoco.mj_kinematics(model, data)
+                lowest[b, t] = lowest_point(model, data)
+                feet[b, t] = [geom_lowest(model, data, g) for g in patch]
+        result = lowest.reshape(x.shape[:-2]), feet.reshape(x.shape[:-2] + (4,))
+        self._cache = (*key, result)
+        return result
+
+    def lowest_height(self, joints: np.ndarray) -> np.ndarray:
+        return self._per_frame(joints)[0]
+
+    def foot_heights(self, joints: np.ndarray) -> np.ndarray:
+        return self._per_frame(joints)[1]
