@@ -154,19 +154,30 @@ def _kabsch(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     return np.swapaxes(vt, -1, -2) @ (fix[..., :, None] * np.swapaxes(u, -1, -2))
 
 
-def _swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Minimal rotations (..., 3, 3) taking unit vectors a to unit vectors b (Rodrigues)."""
+def swing_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Minimal rotations (..., 3, 3) taking unit vectors a to unit vectors b (HumanML3D's qbetween).
+
+    Rodrigues' formula; for antiparallel vectors (where qbetween returns 0/0) it turns by pi about
+    an axis normal to a.
+    """
     v = np.cross(a, b)
-    c = np.sum(a * b, axis=-1)
+    c = np.sum(a * b, axis=-1)[..., None, None]
     vx = np.zeros(v.shape + (3,))
     vx[..., 0, 1], vx[..., 0, 2] = -v[..., 2], v[..., 1]
     vx[..., 1, 0], vx[..., 1, 2] = v[..., 2], -v[..., 0]
     vx[..., 2, 0], vx[..., 2, 1] = -v[..., 1], v[..., 0]
-    k = 1.0 / np.maximum(1.0 + c, 1e-9)
-    return np.eye(3) + vx + (vx @ vx) * k[..., None, None]
+    opposite = c[..., 0, 0] < -1.0 + 1e-9
+    rot = np.eye(3) + vx + (vx @ vx) / np.where(opposite[..., None, None], 1.0, 1.0 + c)
+    if np.any(opposite):
+        a_opp = a[opposite]
+        helper = np.eye(3)[np.argmin(np.abs(a_opp), axis=-1)]
+        n = unit_vectors(np.cross(a_opp, helper))
+        rot[opposite] = 2.0 * n[:, :, None] * n[:, None, :] - np.eye(3)
+    return rot
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
+def unit_vectors(v: np.ndarray) -> np.ndarray:
+    """v (..., 3) scaled to unit length (zero vectors stay zero)."""
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
 
 
@@ -179,7 +190,7 @@ def offsets_from_joints(joints: np.ndarray) -> np.ndarray:
     """
     joints = np.asarray(joints, dtype=np.float64)
     lengths = np.median(bone_lengths(joints), axis=0)
-    offsets = _unit(REST_OFFSETS) * lengths[:, None]
+    offsets = unit_vectors(REST_OFFSETS) * lengths[:, None]
     for j in range(NUM_JOINTS):
         kids = children(j)
         if len(kids) < 2:
@@ -211,9 +222,9 @@ def inverse_kinematics(joints: np.ndarray, offsets: np.ndarray | None = None) ->
             vec = joints[:, kids] - joints[:, j : j + 1]
             glob[:, j] = _kabsch(np.broadcast_to(offsets[kids], vec.shape), vec)
         elif len(kids) == 1:
-            rest_dir = _unit(np.einsum("tij,j->ti", parent_rot, offsets[kids[0]]))
-            dir_now = _unit(joints[:, kids[0]] - joints[:, j])
-            glob[:, j] = _swing(rest_dir, dir_now) @ parent_rot
+            rest_dir = unit_vectors(np.einsum("tij,j->ti", parent_rot, offsets[kids[0]]))
+            dir_now = unit_vectors(joints[:, kids[0]] - joints[:, j])
+            glob[:, j] = swing_rotation(rest_dir, dir_now) @ parent_rot
         else:
             glob[:, j] = parent_rot
         local[:, j] = np.swapaxes(parent_rot, -1, -2) @ glob[:, j]

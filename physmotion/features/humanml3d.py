@@ -73,6 +73,8 @@ from physmotion.skeleton import (
     RAW_OFFSETS,
     REST_OFFSETS,
     facing_direction,
+    swing_rotation,
+    unit_vectors,
 )
 
 if TYPE_CHECKING:
@@ -215,7 +217,7 @@ def _uniform_skeleton(pos: np.ndarray, target_offsets: np.ndarray) -> np.ndarray
     out[:, 0] = pos[:, 0] * scale
     for j in range(1, NUM_JOINTS):  # parents come before children in the SMPL order
         p = PARENTS[j]
-        out[:, j] = out[:, p] + _unit(pos[:, j] - pos[:, p]) * tgt_len[j]
+        out[:, j] = out[:, p] + unit_vectors(pos[:, j] - pos[:, p]) * tgt_len[j]
     return out
 
 
@@ -254,15 +256,11 @@ def _local_rot6d(pos: np.ndarray, yaw: np.ndarray) -> np.ndarray:
     now; its local rotation is relative to its chain parent's bone, or to the root rotation r_rot[t] for
     the first bone of every chain. cont6d = first two columns of the rotation matrix.
     """
-    bone_dir = _unit(pos[:, 1:] - pos[:, _PARENT[1:]])  # (T, 21, 3)
+    bone_dir = unit_vectors(pos[:, 1:] - pos[:, _PARENT[1:]])  # (T, 21, 3)
     rest_dir = np.broadcast_to(RAW_OFFSETS[1:], bone_dir.shape)
-    glob = np.concatenate([_yaw_matrix(yaw)[:, None], _swing(rest_dir, bone_dir)], axis=1)  # (T, 22, 3, 3)
+    glob = np.concatenate([_yaw_matrix(yaw)[:, None], swing_rotation(rest_dir, bone_dir)], axis=1)  # (T, 22, 3, 3)
     local = np.swapaxes(glob[:, _ROT_PARENT[1:]], -1, -2) @ glob[:, 1:]  # (T, 21, 3, 3)
     return np.concatenate([local[..., :, 0], local[..., :, 1]], axis=-1)
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), _MIN_NORM)
 
 
 def _rot_y(angle: np.ndarray | float, v: np.ndarray) -> np.ndarray:
@@ -277,27 +275,6 @@ def _yaw_matrix(angle: np.ndarray) -> np.ndarray:
     c, s = np.cos(angle), np.sin(angle)
     zero, one = np.zeros_like(c), np.ones_like(c)
     return np.stack([c, zero, s, zero, one, zero, -s, zero, c], axis=-1).reshape(c.shape + (3, 3))
-
-
-def _swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Minimal rotations (..., 3, 3) taking unit vectors a to unit vectors b (HumanML3D's qbetween).
-
-    For antiparallel vectors (where qbetween returns 0/0) it turns by pi about an axis normal to a.
-    """
-    v = np.cross(a, b)
-    c = np.sum(a * b, axis=-1)[..., None, None]
-    vx = np.zeros(v.shape + (3,))
-    vx[..., 0, 1], vx[..., 0, 2] = -v[..., 2], v[..., 1]
-    vx[..., 1, 0], vx[..., 1, 2] = v[..., 2], -v[..., 0]
-    vx[..., 2, 0], vx[..., 2, 1] = -v[..., 1], v[..., 0]
-    opposite = c[..., 0, 0] < -1.0 + 1e-9
-    rot = np.eye(3) + vx + (vx @ vx) / np.where(opposite[..., None, None], 1.0, 1.0 + c)
-    if np.any(opposite):
-        a_opp = a[opposite]
-        helper = np.eye(3)[np.argmin(np.abs(a_opp), axis=-1)]
-        n = _unit(np.cross(a_opp, helper))
-        rot[opposite] = 2.0 * n[:, :, None] * n[:, None, :] - np.eye(3)
-    return rot
 
 
 # ---------------------------------------------------------------------------------------------------

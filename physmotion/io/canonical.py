@@ -35,6 +35,7 @@ from physmotion.skeleton import (
     forward_kinematics,
     inverse_kinematics,
     offsets_from_joints,
+    unit_vectors,
 )
 
 # Z-up -> Y-up is a -90 degree turn about X: (x, y, z) -> (x, z, -y); X-up -> Y-up a +90 degree
@@ -205,17 +206,17 @@ def is_tpose_start(joints: np.ndarray) -> bool:
     """
     j = JOINT_INDEX
     p = joints[0]
-    trunk = _unit(p[j["neck"]] - p[j["pelvis"]])
-    across = _unit(p[j["left_shoulder"]] - p[j["right_shoulder"]])
+    trunk = unit_vectors(p[j["neck"]] - p[j["pelvis"]])
+    across = unit_vectors(p[j["left_shoulder"]] - p[j["right_shoulder"]])
     for side, out in (("left", across), ("right", -across)):
-        upper = _unit(p[j[f"{side}_elbow"]] - p[j[f"{side}_shoulder"]])
-        fore = _unit(p[j[f"{side}_wrist"]] - p[j[f"{side}_elbow"]])
+        upper = unit_vectors(p[j[f"{side}_elbow"]] - p[j[f"{side}_shoulder"]])
+        fore = unit_vectors(p[j[f"{side}_wrist"]] - p[j[f"{side}_elbow"]])
         if abs(upper @ trunk) > _TPOSE_ARM_LEVEL or abs(fore @ trunk) > _TPOSE_ARM_LEVEL:
             return False
         if upper @ out < _TPOSE_ARM_OUT or fore @ out < _TPOSE_ARM_OUT:
             return False
-        thigh = _unit(p[j[f"{side}_knee"]] - p[j[f"{side}_hip"]])
-        shin = _unit(p[j[f"{side}_ankle"]] - p[j[f"{side}_knee"]])
+        thigh = unit_vectors(p[j[f"{side}_knee"]] - p[j[f"{side}_hip"]])
+        shin = unit_vectors(p[j[f"{side}_ankle"]] - p[j[f"{side}_knee"]])
         if -(thigh @ trunk) < _TPOSE_STRAIGHT or -(shin @ trunk) < _TPOSE_STRAIGHT:
             return False
     local = joints[:3] - joints[:3, :1]
@@ -235,9 +236,9 @@ def _rigid_pelvis(joints: np.ndarray) -> np.ndarray:
     spine, as IK keeps each bone's direction).
     """
     pelvis, left, right, spine1 = (JOINT_INDEX[n] for n in ("pelvis", "left_hip", "right_hip", "spine1"))
-    across = _unit(joints[:, left] - joints[:, right])
+    across = unit_vectors(joints[:, left] - joints[:, right])
     down = joints[:, left] + joints[:, right] - 2 * joints[:, pelvis]
-    normal = _unit(np.cross(across, down))
+    normal = unit_vectors(np.cross(across, down))
     frame = np.stack([across, np.cross(normal, across), normal], axis=-1)  # (T, 3, 3) orthonormal columns
     local = np.einsum("tji,tj->ti", frame, joints[:, spine1] - joints[:, pelvis])
     out = joints.copy()
@@ -257,6 +258,3 @@ def _place(joints: np.ndarray, rotations: np.ndarray) -> tuple[np.ndarray, np.nd
     return placed, rotations
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    """v / |v| along the last axis."""
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)

@@ -35,6 +35,8 @@ from physmotion.skeleton import (
     children,
     forward_kinematics,
     inverse_kinematics,
+    swing_rotation,
+    unit_vectors,
 )
 
 NQ = 7 + 3 * (NUM_JOINTS - 1)
@@ -180,22 +182,10 @@ _BEND_FULL = np.radians(20.0)
 _BEND_NONE = np.radians(5.0)
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
-
-
 def _axis_angle(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
     """Rotations (..., 3, 3) about unit axes (..., 3) by angles (...)."""
     rotvec = (axis * angle[..., None]).reshape(-1, 3)
     return Rotation.from_rotvec(rotvec).as_matrix().reshape(angle.shape + (3, 3))
-
-
-def _swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Minimal rotations (..., 3, 3) taking unit vectors a to unit vectors b."""
-    axis = np.cross(a, b)
-    s = np.linalg.norm(axis, axis=-1)
-    angle = np.arctan2(s, np.sum(a * b, axis=-1))
-    return _axis_angle(_unit(axis), angle)
 
 
 def _global(local: np.ndarray) -> np.ndarray:
@@ -241,7 +231,7 @@ def _anatomical_twist(joints: np.ndarray, local: np.ndarray, offsets: np.ndarray
     glob = _global(local)
     for p_name, c_name, n_des, max_twist in _LIMBS:
         p, c = JOINT_INDEX[p_name], JOINT_INDEX[c_name]
-        a = _unit(offsets[c])  # the bone p -> c, in p's frame: the twist axis
+        a = unit_vectors(offsets[c])  # the bone p -> c, in p's frame: the twist axis
         rotvec = Rotation.from_matrix(local[:, c]).as_rotvec()  # (T, 3) the child's bend, in p's frame
         bend = np.linalg.norm(rotvec, axis=-1)
         n = rotvec - np.outer(rotvec @ a, a)  # bend axis, projected off the twist axis
@@ -266,9 +256,9 @@ def _anatomical_twist(joints: np.ndarray, local: np.ndarray, offsets: np.ndarray
                 local[:, j] = np.eye(3)
                 break
             k = kids[0]
-            rest = _unit(np.einsum("tij,j->ti", glob[:, parent], offsets[k]))
-            now = _unit(joints[:, k] - joints[:, j])
-            glob[:, j] = _swing(rest, now) @ glob[:, parent]
+            rest = unit_vectors(np.einsum("tij,j->ti", glob[:, parent], offsets[k]))
+            now = unit_vectors(joints[:, k] - joints[:, j])
+            glob[:, j] = swing_rotation(rest, now) @ glob[:, parent]
             local[:, j] = np.swapaxes(glob[:, parent], -1, -2) @ glob[:, j]
             j, parent = k, j
     return local
