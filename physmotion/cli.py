@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Optional
 
 import typer
 from rich.console import Console
@@ -74,11 +73,11 @@ def data_stats(root: Path = typer.Argument(..., help="A HumanML3D-layout folder.
 def import_motion(
     path: Path = typer.Argument(..., help="A .bvh or .amc file (an .amc needs --asf)."),
     out: Path = typer.Option(..., "-o", "--out", help="Output .npz (or .bvh)."),
-    rig: Optional[str] = typer.Option(None, help="Rig table name (see physmotion.io.rigs); guessed if left out."),
-    asf: Optional[Path] = typer.Option(None, help="The skeleton (.asf) of an .amc file."),
-    fps: Optional[float] = typer.Option(None, help="True frame rate, where the header is wrong or absent."),
-    up_axis: Optional[str] = typer.Option(None, help="Y or Z, overriding the rig's."),
-    units: Optional[str] = typer.Option(None, help="cm, m, inch or a factor to metres, overriding the rig's."),
+    rig: str | None = typer.Option(None, help="Rig table name (see physmotion.io.rigs); guessed if left out."),
+    asf: Path | None = typer.Option(None, help="The skeleton (.asf) of an .amc file."),
+    fps: float | None = typer.Option(None, help="True frame rate, where the header is wrong or absent."),
+    up_axis: str | None = typer.Option(None, help="Y or Z, overriding the rig's."),
+    units: str | None = typer.Option(None, help="cm, m, inch or a factor to metres, overriding the rig's."),
 ) -> None:
     """Import one mocap file to the 22-joint skeleton at 20 fps, Y up, floor at 0, facing +Z."""
     from physmotion.io.export import save_motion
@@ -147,6 +146,93 @@ def metrics(
             body = HumanoidSurface()
         results[path.name] = physical_metrics(motion.joints, fps=motion.fps, body=body)
     console.print(format_table(results, title=f"physical metrics ({surface} surface)"))
+
+
+@app.command("generate")
+def generate_cmd(
+    texts: list[str] = typer.Argument(..., help="One or more captions, e.g. \"a person walks forward\"."),
+    out: Path = typer.Option(Path("out"), "-o", "--out", help="Output folder."),
+    seconds: float = typer.Option(6.0, help="Length of each motion in seconds."),
+    physics: str = typer.Option("physdiff", help="physdiff (projection inside sampling), post, or none."),
+    schedule: str = typer.Option("end:4,space:1", help="PhysDiff projection steps: uniform:N, start:M,end:N, end:N,space:S."),
+    post_projections: int = typer.Option(1, help="--physics post: projections after sampling."),
+    num: int = typer.Option(1, help="Samples per caption."),
+    seed: int = typer.Option(0, help="Random seed; the same seed gives the same motions."),
+    sampler: str = typer.Option("ddim", help="ddim, ddpm or dpmpp (DPM-Solver++ 2M, Karras spacing)."),
+    steps: int = typer.Option(50, help="Sampling steps."),
+    eta: float = typer.Option(0.0, help="DDIM eta."),
+    cfg_scale: float = typer.Option(2.5, help="Classifier-free guidance scale."),
+    model: Path | None = typer.Option(None, help="Model folder (default: the shipped model)."),
+    preview: bool = typer.Option(True, help="Write a GIF preview per motion."),
+) -> None:
+    """Generate motions from text: .npz, .bvh and a GIF preview per sample."""
+    from physmotion.diffusion.model import MotionDiffusion
+    from physmotion.diffusion.samplers import SamplerConfig
+    from physmotion.generate import GenerateConfig, check_request, generate, write_outputs
+
+    cfg = GenerateConfig(seconds=seconds, num=num, physics=physics, schedule=schedule,
+                         post_projections=post_projections, seed=seed,
+                         sampler=SamplerConfig(sampler=sampler, steps=steps, eta=eta, cfg_scale=cfg_scale))
+    net = MotionDiffusion.load(model)
+    check_request(texts, cfg, net)
+    with _step_bar("generating") as tick:
+        result = generate(texts, cfg, net, on_step=tick)
+    paths = write_outputs(result, out, cfg, preview=preview)
+    log = result.projections
+    phys = f"; projections kept {sum(log.selected)}/{len(log.selected)}" if log.selected else ""
+    console.print(f"wrote {len(result.motions)} motion(s) to {out} ({len(paths)} files){phys}", highlight=False)
+
+
+def _step_bar(label: str):
+    """A context manager yielding tick(done, total) that drives a rich progress bar (silent if not a TTY)."""
+    from contextlib import contextmanager
+
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    @contextmanager
+    def bar():
+        progress = Progress(TextColumn(label), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                            console=Console(stderr=True), disable=not sys.stderr.isatty())
+        with progress:
+            task = progress.add_task(label, total=None)
+            yield lambda done, total: progress.update(task, completed=done, total=total)
+
+    return bar()
+
+
+train_app = typer.Typer(help="Train models.", no_args_is_help=True)
+app.add_typer(train_app, name="train")
+
+
+@train_app.command("denoiser")
+def train_denoiser_cmd(
+    data: Path = typer.Option(..., help="HumanML3D-layout folder (our build or a real HumanML3D)."),
+    out: Path = typer.Option(..., help="Run folder: model, train_state.pt, loss.csv."),
+    arch: str = typer.Option("transformer", help="transformer (MDM) or unet (BioMoDiffuse's 1D UNet)."),
+    d_model: int = typer.Option(256, help="Width."),
+    layers: int = typer.Option(4, help="Transformer layers, or UNet levels."),
+    heads: int = typer.Option(4, help="Attention heads."),
+    crop: int = typer.Option(120, help="Training windows are cropped to at most this many frames."),
+    batch_size: int = typer.Option(32, help="Batch size."),
+    steps: int = typer.Option(4000, help="Total optimiser steps."),
+    lr: float = typer.Option(2e-4, help="AdamW learning rate."),
+    bf16: bool = typer.Option(True, help="bf16 autocast (CPU and GPU)."),
+    device: str = typer.Option("cpu", help="cpu or cuda (multi-GPU: run under `accelerate launch`)."),
+    seed: int = typer.Option(0, help="Seed of data order, noise and initialisation."),
+    checkpoint_minutes: float = typer.Option(5.0, help="Minutes between atomic checkpoints."),
+    resume: bool = typer.Option(False, "--resume", help="Continue the run in --out where it stopped."),
+) -> None:
+    """Train a text-to-motion denoiser (DDPM, x0 prediction, EMA, classifier-free text dropout)."""
+    from physmotion.diffusion.denoiser import DenoiserConfig
+    from physmotion.diffusion.train import TrainConfig, train_denoiser
+
+    den = DenoiserConfig(arch=arch, d_model=d_model, layers=layers, heads=heads, max_frames=max(196, crop))
+    cfg = TrainConfig(data=str(data), out=str(out), denoiser=den, crop=crop, batch_size=batch_size, steps=steps,
+                      lr=lr, bf16=bf16, device=device, seed=seed, checkpoint_minutes=checkpoint_minutes)
+    result = train_denoiser(cfg, resume=resume, progress=sys.stderr.isatty())
+    last = f", last loss {result.losses[-1][1]:.4f}" if result.losses else ""
+    console.print(f"trained to step {result.step} in {result.seconds / 60:.1f} min{last}; model in {out}",
+                  highlight=False)
 
 
 def main() -> None:

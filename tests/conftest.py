@@ -7,6 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from physmotion.data.build import BuildConfig, BuildReport, build_dataset
+
 MOCAP_DIR = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "mocap"
 
 
@@ -48,3 +50,15 @@ def imported_clips(import_results: dict[str, object]) -> dict[str, object]:
     return {
         k: v[0] if isinstance(v, tuple) else v for k, v in import_results.items() if not k.startswith("__")
     }
+
+
+@pytest.fixture(scope="session")
+def built(tmp_path_factory: pytest.TempPathFactory, mocap_dir: Path) -> BuildReport:
+    """The whole mocap collection built with the default options (about 12 s)."""
+    out = tmp_path_factory.mktemp("build") / "mocap"
+    return build_dataset(mocap_dir, out, BuildConfig(), progress=False)
+
+
+@pytest.fixture(scope="session")
+def built_dir(built: BuildReport) -> Path:
+    return built.out

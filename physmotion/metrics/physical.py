@@ -19,9 +19,10 @@ Sources followed (code read, not copied):
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Callable, Literal, Mapping, Sequence, Union
+from typing import Literal, Union
 
 import numpy as np
 from rich.table import Table

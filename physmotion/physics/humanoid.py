@@ -35,7 +35,14 @@ import numpy as np
 
 from physmotion.errors import ShapeError
 from physmotion.physics.frames import to_mujoco
-from physmotion.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, REST_OFFSETS, children, offsets_from_joints
+from physmotion.skeleton import (
+    JOINT_INDEX,
+    JOINT_NAMES,
+    NUM_JOINTS,
+    REST_OFFSETS,
+    children,
+    offsets_from_joints,
+)
 
 AXES = "xyz"
 

@@ -1,0 +1,93 @@
+"""Noise schedules and samplers' schedulers, from diffusers.
+
+Training follows MDM: 1000 DDPM steps on the cosine schedule (``squaredcos_cap_v2``), and the network
+predicts x0 (``prediction_type="sample"``), so every diffusers scheduler can step on its output as is.
+
+Sampling schedulers:
+- ``ddpm``: ancestral DDPM (``DDPMScheduler``) on a subset of steps;
+- ``ddim``: ``DDIMScheduler`` with eta (0 = deterministic), the one PhysDiff's Algorithm 2 uses;
+- ``dpmpp``: 2nd-order multistep DPM-Solver++ (``DPMSolverMultistepScheduler``) with Karras spacing.
+
+The Karras pitfall: with the cosine schedule, diffusers' ``use_karras_sigmas=True`` starts from the
+schedule's sigma_max of ~2e4, and the first half of the Karras sigmas all round to timestep 998 (at 10
+steps: 998, 998, 998, 998, 997, 995, 983, 894, 259, 0); the repeated timesteps then break the scheduler's
+step-index lookup and a plain ``for t in timesteps`` loop runs off the end. We instead compute the Karras
+sigmas between the schedule's sigma_min and ``KARRAS_SIGMA_MAX`` (80, EDM's value, where the signal is
+1.2% of the noise), map them to distinct integer timesteps, and hand those to the scheduler.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+SAMPLERS = ("ddpm", "ddim", "dpmpp")
+KARRAS_SIGMA_MAX = 80.0
+KARRAS_RHO = 7.0
+
+
+@dataclass
+class DiffusionConfig:
+    """The forward process; stored in every checkpoint."""
+
+    num_train_timesteps: int = 1000
+    beta_schedule: str = "squaredcos_cap_v2"  # MDM's cosine schedule
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def _common(cfg: DiffusionConfig) -> dict:
+    return {"num_train_timesteps": cfg.num_train_timesteps, "beta_schedule": cfg.beta_schedule,
+            "prediction_type": "sample"}  # fmt: skip
+
+
+def training_scheduler(cfg: DiffusionConfig):
+    """The DDPM forward process used to noise training samples (``add_noise``)."""
+    from diffusers import DDPMScheduler
+
+    return DDPMScheduler(**_common(cfg), clip_sample=False)
+
+
+def karras_timesteps(alphas_cumprod: np.ndarray, steps: int, sigma_max: float = KARRAS_SIGMA_MAX) -> list[int]:
+    """Distinct integer timesteps, descending, whose sigmas follow Karras et al.'s rho=7 spacing.
+
+    alphas_cumprod: (N,) of the training schedule. sigma(t) = sqrt((1 - a_t) / a_t) is increasing in t,
+    so each Karras sigma maps to a fractional t by interpolation; rounding can merge neighbours at the
+    low-noise end, which are dropped (so fewer than ``steps`` may come back for tiny schedules).
+    """
+    sigmas_train = np.sqrt((1.0 - alphas_cumprod) / alphas_cumprod)
+    lo, hi = float(sigmas_train[0]), min(float(sigmas_train[-1]), sigma_max)
+    ramp = np.linspace(0.0, 1.0, steps)
+    inv = hi ** (1 / KARRAS_RHO) + ramp * (lo ** (1 / KARRAS_RHO) - hi ** (1 / KARRAS_RHO))
+    sigmas = inv**KARRAS_RHO
+    t = np.interp(np.log(sigmas), np.log(sigmas_train), np.arange(len(sigmas_train)))
+    out: list[int] = []
+    for v in np.round(t).astype(int):
+        if not out or v < out[-1]:
+            out.append(int(v))
+    return out
+
+
+def sampling_scheduler(name: str, steps: int, cfg: DiffusionConfig):
+    """A diffusers scheduler for ``name`` in :data:`SAMPLERS`, with its timesteps set for ``steps`` steps."""
+    if name not in SAMPLERS:
+        raise ValueError(f"unknown sampler {name!r}: choose one of {', '.join(SAMPLERS)}")
+    if not 1 <= steps <= cfg.num_train_timesteps:
+        raise ValueError(f"steps must be in 1..{cfg.num_train_timesteps}, got {steps}")
+    from diffusers import DDIMScheduler, DDPMScheduler, DPMSolverMultistepScheduler
+
+    if name == "ddpm":
+        sched = DDPMScheduler(**_common(cfg), clip_sample=False, timestep_spacing="trailing")
+        sched.set_timesteps(steps)
+    elif name == "ddim":
+        # set_alpha_to_one: the last step returns the predicted x0 itself (no leftover noise).
+        sched = DDIMScheduler(**_common(cfg), clip_sample=False, set_alpha_to_one=True, timestep_spacing="trailing")
+        sched.set_timesteps(steps)
+    else:
+        sched = DPMSolverMultistepScheduler(**_common(cfg), algorithm_type="dpmsolver++", solver_order=2,
+                                            final_sigmas_type="zero")  # fmt: skip
+        sched.set_timesteps(timesteps=karras_timesteps(sched.alphas_cumprod.numpy(), steps))
+        sched.set_begin_index(0)
+    return sched

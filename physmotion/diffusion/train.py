@@ -1,0 +1,216 @@
+"""Training the denoiser: DDPM (1000 steps, cosine), x0 loss, AdamW, EMA, gradient clipping, bf16 autocast.
+
+MDM's recipe (GuyTevet/motion-diffusion-model, train/training_loop.py): predict x0, masked MSE on the
+valid frames, classifier-free text dropout of 10%, AdamW with lr 1e-4. ``accelerate`` handles the device
+(``--device cuda``), mixed precision and multi-GPU (``accelerate launch``); on one CPU process it is a
+thin wrapper. diffusers' ``EMAModel`` keeps the exponential moving average that is saved for sampling.
+
+Exact resumption without saving RNG streams: the batch order of epoch e is a permutation drawn from
+``(seed, e)``, and the noise, timesteps, text dropout and dropout masks of step s come from generators
+seeded by ``(seed, s)``. A resumed run therefore replays exactly the steps an uninterrupted run takes.
+The output folder holds the model for sampling (EMA weights, :class:`MotionDiffusion`), ``train_state.pt``
+(raw weights, optimizer, EMA, step) and ``loss.csv``; all are written atomically every few minutes.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from physmotion.conventions import MAX_FRAMES
+from physmotion.data.dataset import MotionDataset, collate
+from physmotion.diffusion.denoiser import DenoiserConfig, build_denoiser
+from physmotion.diffusion.model import MotionDiffusion
+from physmotion.diffusion.schedule import DiffusionConfig, training_scheduler
+from physmotion.errors import PhysmotionError
+from physmotion.motion import write_atomic
+from physmotion.text.encoder import load_text_encoder
+
+STATE_FILE = "train_state.pt"
+LOSS_FILE = "loss.csv"
+
+
+@dataclass
+class TrainConfig:
+    """Everything a training run depends on; saved with its checkpoints."""
+
+    data: str
+    out: str
+    denoiser: DenoiserConfig = field(default_factory=DenoiserConfig)
+    diffusion: DiffusionConfig = field(default_factory=DiffusionConfig)
+    text_encoder: str = "minilm"
+    crop: int = MAX_FRAMES  # training windows are cropped to at most this many frames
+    random_crop: bool = True  # HumanML3D's random windows and captions; False: the start, first caption
+    batch_size: int = 32
+    steps: int = 10000
+    lr: float = 2e-4
+    weight_decay: float = 0.01
+    warmup: int = 200
+    ema_decay: float = 0.999
+    grad_clip: float = 1.0
+    text_drop: float = 0.1
+    bf16: bool = True
+    device: str = "cpu"
+    seed: int = 0
+    checkpoint_minutes: float = 5.0
+    log_every: int = 25
+
+
+@dataclass
+class TrainResult:
+    step: int
+    losses: list[tuple[int, float]]  # (step, mean loss over the last log_every steps)
+    seconds: float
+
+
+def _rng(seed: int, *key: int) -> torch.Generator:
+    return torch.Generator().manual_seed(int(np.random.SeedSequence([seed, *key]).generate_state(1)[0]))
+
+
+def _batch_indices(n: int, batch: int, seed: int, step: int) -> tuple[int, list[int]]:
+    """(epoch, dataset indices) of the batch at ``step``: epoch-wise permutations, last partial batch dropped."""
+    per_epoch = max(n // batch, 1)
+    epoch, k = divmod(step, per_epoch)
+    perm = torch.randperm(n, generator=_rng(seed, 1, epoch)).tolist()
+    return epoch, perm[k * batch : (k + 1) * batch] if n >= batch else perm
+
+
+def masked_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """Mean squared error over valid frames: pred/target (B, T, D), mask (B, T) bool."""
+    m = mask[..., None].to(pred.dtype)
+    return ((pred - target) ** 2 * m).sum() / (m.sum() * pred.shape[-1]).clamp_min(1.0)
+
+
+def train_denoiser(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> TrainResult:
+    """Train (or resume training) a text-to-motion denoiser on a HumanML3D-layout folder."""
+    from accelerate import Accelerator
+    from diffusers.training_utils import EMAModel
+
+    out = Path(cfg.out)
+    state_path = out / STATE_FILE
+    if resume and not state_path.is_file():
+        raise PhysmotionError(f"{out}: nothing to resume (no {STATE_FILE})")
+    if not resume and state_path.is_file():
+        raise PhysmotionError(f"{out} already holds a training run: pass --resume or choose another --out")
+    if cfg.denoiser.max_frames < cfg.crop:
+        raise PhysmotionError(f"crop {cfg.crop} is longer than the model's {cfg.denoiser.max_frames} frames")
+
+    dataset = MotionDataset(cfg.data, "train", max_frames=cfg.crop, random_crop=cfg.random_crop, seed=cfg.seed)
+    encoder = load_text_encoder(cfg.text_encoder)
+    cfg.denoiser.text_dim, cfg.denoiser.feature_dim = encoder.dim, dataset.normalizer.dim
+    accel = Accelerator(cpu=cfg.device == "cpu", mixed_precision="bf16" if cfg.bf16 else "no")
+    torch.manual_seed(cfg.seed)
+    net = build_denoiser(cfg.denoiser)
+    opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    ema = EMAModel(net.parameters(), decay=cfg.ema_decay)
+    step, losses = 0, []
+    if resume:
+        state = torch.load(state_path, map_location="cpu", weights_only=False)
+        net.load_state_dict(state["net"])
+        opt.load_state_dict(state["opt"])
+        ema.load_state_dict(state["ema"])
+        step, losses = state["step"], [tuple(x) for x in state["losses"]]
+    net, opt = accel.prepare(net, opt)
+    ema.to(accel.device)
+    noise_sched = training_scheduler(cfg.diffusion)
+
+    def lr_at(s: int) -> float:
+        return cfg.lr * min(1.0, (s + 1) / max(cfg.warmup, 1))
+
+    def save() -> None:
+        _save(cfg, out, accel.unwrap_model(net), opt, ema, step, losses, dataset)
+
+    t0 = last_save = time.monotonic()
+    window: list[float] = []
+    bar = _progress(progress, cfg.steps, step)
+    net.train()
+    while step < cfg.steps:
+        epoch, idx = _batch_indices(len(dataset), cfg.batch_size, cfg.seed, step)
+        dataset.set_epoch(epoch)
+        batch = collate([dataset[i] for i in idx])
+        x0, mask = batch["motion"].to(accel.device), batch["mask"].to(accel.device)
+        text = encoder.encode(batch["text"]).to(accel.device)
+        g = _rng(cfg.seed, 2, step)
+        t = torch.randint(0, cfg.diffusion.num_train_timesteps, (len(idx),), generator=g)
+        noise = torch.randn(x0.shape, generator=g)
+        drop = torch.rand(len(idx), generator=g) < cfg.text_drop
+        xt = noise_sched.add_noise(x0.cpu(), noise, t).to(accel.device)
+        torch.manual_seed(int(torch.randint(0, 2**31 - 1, (1,), generator=g)))  # dropout masks of this step
+        for group in opt.param_groups:
+            group["lr"] = lr_at(step)
+        with accel.autocast():
+            pred = net(xt, t.to(accel.device), text, mask, drop.to(accel.device))
+        loss = masked_mse(pred.float(), x0, mask)
+        if not torch.isfinite(loss):
+            raise PhysmotionError(f"training diverged at step {step} (loss {loss.item()})")
+        opt.zero_grad(set_to_none=True)
+        accel.backward(loss)
+        accel.clip_grad_norm_(net.parameters(), cfg.grad_clip)
+        opt.step()
+        ema.step(accel.unwrap_model(net).parameters())
+        step += 1
+        window.append(loss.item())
+        if len(window) == cfg.log_every or step == cfg.steps:
+            losses.append((step, float(np.mean(window))))
+            window = []
+        if bar is not None:
+            bar.update(step, loss=losses[-1][1] if losses else loss.item())
+        if time.monotonic() - last_save > cfg.checkpoint_minutes * 60 and accel.is_main_process:
+            save()
+            last_save = time.monotonic()
+    if bar is not None:
+        bar.close()
+    if accel.is_main_process:
+        save()
+    return TrainResult(step=step, losses=losses, seconds=time.monotonic() - t0)
+
+
+def _save(cfg: TrainConfig, out: Path, net: torch.nn.Module, opt, ema, step: int,
+          losses: list, dataset: MotionDataset) -> None:  # fmt: skip
+    """Checkpoint: resumable state first, then the EMA model for sampling, then the loss log."""
+    state = {"net": net.state_dict(), "opt": opt.state_dict(), "ema": ema.state_dict(), "step": step,
+             "losses": losses, "config": asdict(cfg)}  # fmt: skip
+    write_atomic(out / STATE_FILE, lambda f: torch.save(state, f))
+    ema_net = build_denoiser(cfg.denoiser)
+    ema.copy_to(ema_net.parameters())
+    info_path = Path(cfg.data) / "build_info.json"
+    build_info = json.loads(info_path.read_text()) if info_path.is_file() else {}
+    info = {"data": str(cfg.data), "licence_tags": build_info.get("licence_tags", ["unknown"]),
+            "train_items": len(dataset), "steps": step, "train": _summary(cfg)}  # fmt: skip
+    MotionDiffusion(ema_net.eval(), cfg.denoiser, cfg.diffusion, dataset.normalizer, cfg.text_encoder, info).save(out)
+    lines = "step,loss\n" + "".join(f"{s},{v:.6f}\n" for s, v in losses)
+    write_atomic(out / LOSS_FILE, lambda f: f.write(lines), "w")
+
+
+def _summary(cfg: TrainConfig) -> dict:
+    d = asdict(cfg)
+    d.pop("denoiser"), d.pop("diffusion")
+    return d
+
+
+class _Bar:
+    """A rich progress bar with loss and ETA."""
+
+    def __init__(self, total: int, start: int) -> None:
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+        self.progress = Progress(TextColumn("training"), BarColumn(), MofNCompleteColumn(),
+                                 TextColumn("loss {task.fields[loss]:.4f}"), TimeRemainingColumn())  # fmt: skip
+        self.task = self.progress.add_task("train", total=total, completed=start, loss=math.nan)
+        self.progress.start()
+
+    def update(self, step: int, loss: float) -> None:
+        self.progress.update(self.task, completed=step, loss=loss)
+
+    def close(self) -> None:
+        self.progress.stop()
+
+
+def _progress(enabled: bool, total: int, start: int) -> _Bar | None:
+    return _Bar(total, start) if enabled else None
