@@ -1,0 +1,1 @@
+"""Shipped model weights (safetensors) with their model cards; see ``default/README.md``."""
