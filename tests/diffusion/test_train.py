@@ -13,7 +13,7 @@ from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.samplers import SamplerConfig, sample
 from physmotion.diffusion.train import STATE_FILE, train_denoiser
 from physmotion.errors import PhysmotionError
-from tests.diffusion.conftest import tiny_config
+from tests.conftest import tiny_config
 
 
 @pytest.mark.slow
