@@ -179,7 +179,7 @@ def generate_cmd(
         result = generate(texts, cfg, net, on_step=tick)
     paths = write_outputs(result, out, cfg, preview=preview)
     log = result.projections
-    phys = f"; projections kept {sum(log.selected)}/{len(log.selected)}" if log.selected else ""
+    phys = f"; humanoid tracked without a fall in {sum(log.tracked)}/{len(log.tracked)} projections" if log.tracked else ""
     console.print(f"wrote {len(result.motions)} motion(s) to {out} ({len(paths)} files){phys}", highlight=False)
 
 

@@ -59,7 +59,8 @@ class ProjectionLog:
     """What the projections did: one entry per projected motion."""
 
     calls: int = 0
-    selected: list[bool] = field(default_factory=list)
+    selected: list[bool] = field(default_factory=list)  # the simulation was returned
+    tracked: list[bool] = field(default_factory=list)  # ... and the humanoid never fell (no reset)
     mpjpe_mm: list[float] = field(default_factory=list)
     residual: list[float] = field(default_factory=list)
 
@@ -68,8 +69,9 @@ class FeatureProjector:
     """P on normalised HumanML3D features: (B, T, 263) normalised + lengths -> same, physically projected."""
 
     def __init__(self, model: MotionDiffusion, config: ProjectionConfig | None = None, fps: float = FPS) -> None:
-        self.model, self.config, self.fps = model, config or ProjectionConfig(), fps
+        self.model, self.config, self.fps = model, config or ProjectionConfig(reset_on_fail=True, tau=0.2), fps
         self.log = ProjectionLog()
+        self.last_joints: list[np.ndarray] = []  # P's output of the latest call, physical coordinates
 
     def project_joints(self, joints: list[np.ndarray]) -> list[np.ndarray]:
         """Project a list of joint arrays (T_i, 22, 3); motions of equal length go through in one batch."""
@@ -82,9 +84,11 @@ class FeatureProjector:
             for k, i in enumerate(idx):
                 out[i] = res.joints[k]
                 self.log.selected.append(bool(res.selected[k]))
+                self.log.tracked.append(bool(res.success[k]))
                 self.log.mpjpe_mm.append(float(1000 * res.mpjpe[k].mean()))
                 self.log.residual.append(float(res.residual_force[k].mean()))
         self.log.calls += 1
+        self.last_joints = out
         return out
 
     def __call__(self, x0: torch.Tensor, lengths: list[int]) -> torch.Tensor:
@@ -96,6 +100,12 @@ class FeatureProjector:
         for i, (n, j) in enumerate(zip(lengths, projected)):
             out[i, :n] = torch.from_numpy(norm.normalize(joints_to_features(j))).to(out)
         return out
+
+
+def on_data_floor(joints: np.ndarray) -> np.ndarray:
+    """Joints (T, 22, 3) shifted so that the clip's lowest joint is at y = 0: the dataset's convention and
+    the input P expects (P returns physical coordinates, with the humanoid's soles on the floor)."""
+    return joints - np.array([0.0, joints[..., 1].min(), 0.0])
 
 
 def joints_to_features(joints: np.ndarray) -> np.ndarray:

@@ -54,6 +54,10 @@ class ProjectionConfig:
     # 1: the root residual is Python at the simulation rate and holds the GIL, so two threads were
     # slower than one (bench/physics.py: 1.55 vs 2.03 motions/s at batch 64). 0: one per core.
     threads: int = 1
+    # False: Morph's imitation selection (a failed episode returns the input, flagged). True: put the
+    # humanoid back on the reference where it fails and go on, so the output is always simulated; PhysDiff
+    # sampling uses this, because a kept kinematic input would carry its artefacts to the next step.
+    reset_on_fail: bool = False
 
 
 @dataclass
@@ -148,8 +152,9 @@ def project(
         ref = prepare_reference(model, qpos, cfg.humanoid.control_dt, cfg.tracking)
         jobs.append((model, ref, ModelBasedTracker(model, cfg.tracking)))
         setups.append((model, lift))
-    rolls = simulate_batch(jobs, cfg.humanoid, fail_mpjpe=cfg.tau, threads=cfg.threads)
-    outs = [_back_to_input_rate(roll, model, lift, x, fps, ctrl_fps, cfg.tau)
+    rolls = simulate_batch(jobs, cfg.humanoid, fail_mpjpe=cfg.tau, threads=cfg.threads,
+                           reset_on_fail=cfg.reset_on_fail)
+    outs = [_back_to_input_rate(roll, model, lift, x, fps, ctrl_fps, cfg.tau, cfg.reset_on_fail)
             for roll, (model, lift), x in zip(rolls, setups, joints)]  # fmt: skip
     stacked = {k: np.stack([o[k] for o in outs]) for k in outs[0]}
     result = ProjectedMotion(**stacked)
@@ -159,16 +164,18 @@ def project(
 
 
 def _back_to_input_rate(
-    roll: Rollout, model, lift: float, joints: np.ndarray, fps: float, ctrl_fps: float, tau: float
+    roll: Rollout, model, lift: float, joints: np.ndarray, fps: float, ctrl_fps: float, tau: float,
+    keep_simulated: bool = False,
 ) -> dict[str, np.ndarray]:
-    """One rollout (control rate) as arrays at the input rate, with imitation selection applied."""
+    """One rollout (control rate) as arrays at the input rate, with imitation selection applied (unless
+    ``keep_simulated``: then the simulation, reset where it failed, is always returned)."""
     t = len(joints)
     sim = qpos_to_joints(resample_qpos(roll.qpos, ctrl_fps, fps, count=t), model)
     raised = joints + np.array([0.0, lift, 0.0])
     mpjpe = np.linalg.norm(sim - raised, axis=-1).mean(-1)
     nearest = np.minimum(np.round(np.arange(t) * ctrl_fps / fps).astype(int), len(roll.qpos) - 1)
     success = roll.failed_at is None
-    selected = success and float(mpjpe.max()) < tau
+    selected = keep_simulated or (success and float(mpjpe.max()) < tau)
     return {
         "joints": (sim if selected else joints).astype(np.float32),
         "simulated": sim.astype(np.float32),

@@ -28,6 +28,7 @@ class Rollout:
     residual_force, residual_torque: (N,) root residual used, fractions of W and W x 1 m (0 at step 0);
     contacts: (N, 4) bool, left ankle, left foot, right ankle, right foot touching the floor;
     failed_at: first control step whose MPJPE exceeded the failure threshold, or None.
+    resets: how many times the humanoid was put back on the reference (``reset_on_fail``).
     """
 
     qpos: np.ndarray
@@ -36,15 +37,32 @@ class Rollout:
     residual_torque: np.ndarray
     contacts: np.ndarray
     failed_at: int | None
+    resets: int = 0
 
 
-def reset_state(model, data, ref: Reference) -> None:
-    """Put the humanoid on the reference's first frame, lifted out of the floor if it starts inside it."""
+def _quiet_mujoco_warnings() -> None:
+    """Route MuJoCo's C warnings (printed to stdout and MUJOCO_LOG.TXT by default) to Python's logging.
+
+    A diverging step ("Nan, Inf or huge value in QACC") is expected on badly broken input motions: MuJoCo
+    then resets the state, the tracking error jumps past the failure threshold, and the episode reports
+    it. A line on the user's terminal (and a log file in their working directory) would only confuse.
+    """
+    import logging
+
+    import mujoco
+
+    log = logging.getLogger("physmotion.physics")
+    mujoco.set_mju_user_warning(lambda msg: log.debug("mujoco: %s", msg))
+
+
+def reset_state(model, data, ref: Reference, frame: int = 0) -> None:
+    """Put the humanoid on a reference frame (the first by default), lifted out of the floor if it starts
+    inside it."""
     import mujoco
 
     mujoco.mj_resetData(model, data)
-    data.qpos[:] = ref.qpos[0]
-    data.qvel[:] = ref.qvel[0]
+    data.qpos[:] = ref.qpos[frame]
+    data.qvel[:] = ref.qvel[frame]
     mujoco.mj_kinematics(model, data)
     low = lowest_point(model, data)
     if low < 0.0:
@@ -58,15 +76,19 @@ def simulate(
     controller: Controller,
     config: HumanoidConfig | None = None,
     fail_mpjpe: float = 0.5,
+    reset_on_fail: bool = False,
 ) -> Rollout:
     """Run ``controller`` along ``ref`` (at the control rate of ``config``) from the reference's start.
 
     The episode ends early when the MPJPE to the reference exceeds ``fail_mpjpe`` (Morph's 0.5 m);
-    the remaining steps then repeat the last state and ``failed_at`` is set.
+    the remaining steps then repeat the last state and ``failed_at`` is set. With ``reset_on_fail`` the
+    humanoid is instead put back on the reference at that step and the episode goes on (the usual
+    practice when evaluating imitation policies, e.g. PHC); ``resets`` counts how often.
     """
     import mujoco
 
     cfg = config or HumanoidConfig()
+    _quiet_mujoco_warnings()
     data = mujoco.MjData(model)
     lay = layout(model)
     foot_bodies = {int(lay.body_ids[j]): i for i, j in enumerate(FOOT_JOINTS)}
@@ -77,7 +99,7 @@ def simulate(
     contacts = np.zeros((n, 4), dtype=bool)
     weight = float(model.body_subtreemass[0]) * STANDARD_GRAVITY
     reset_state(model, data, ref)
-    failed_at = None
+    failed_at, resets = None, 0
     for k in range(n):
         qpos[k] = data.qpos
         mpjpe[k] = float(np.mean(np.linalg.norm(data.xpos[lay.body_ids] - ref.joints_mj[k], axis=-1)))
@@ -87,7 +109,13 @@ def simulate(
                     side = foot_bodies.get(int(model.geom_bodyid[g2]))
                     if side is not None:
                         contacts[k, side] = True
-        if mpjpe[k] > fail_mpjpe:
+        if mpjpe[k] > fail_mpjpe and reset_on_fail:
+            failed_at = k if failed_at is None else failed_at
+            resets += 1
+            reset_state(model, data, ref, k)
+            qpos[k] = data.qpos
+            mpjpe[k] = float(np.mean(np.linalg.norm(data.xpos[lay.body_ids] - ref.joints_mj[k], axis=-1)))
+        elif mpjpe[k] > fail_mpjpe:
             failed_at = k
             qpos[k:] = data.qpos
             mpjpe[k:] = mpjpe[k]
@@ -104,7 +132,7 @@ def simulate(
             torque += np.linalg.norm(data.qfrc_applied[3:6]) / weight / cfg.substeps
             mujoco.mj_step(model, data)
         res_f[k + 1], res_t[k + 1] = force, torque
-    return Rollout(qpos, mpjpe, res_f, res_t, contacts, failed_at)
+    return Rollout(qpos, mpjpe, res_f, res_t, contacts, failed_at, resets)
 
 
 def simulate_batch(
@@ -112,6 +140,7 @@ def simulate_batch(
     config: HumanoidConfig | None = None,
     fail_mpjpe: float = 0.5,
     threads: int = 0,
+    reset_on_fail: bool = False,
 ) -> list[Rollout]:
     """:func:`simulate` for many (model, reference, controller) triples on a thread pool.
 
@@ -120,7 +149,7 @@ def simulate_batch(
     """
     threads = threads or os.cpu_count() or 1
     if threads == 1 or len(jobs) == 1:
-        return [simulate(m, r, c, config, fail_mpjpe) for m, r, c in jobs]
+        return [simulate(m, r, c, config, fail_mpjpe, reset_on_fail) for m, r, c in jobs]
     with ThreadPoolExecutor(max_workers=threads) as pool:
-        return list(pool.map(lambda job: simulate(*job, config, fail_mpjpe), jobs))
+        return list(pool.map(lambda job: simulate(*job, config, fail_mpjpe, reset_on_fail), jobs))
 

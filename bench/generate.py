@@ -1,0 +1,49 @@
+"""Generation wall time by physics mode, one table from one run (compare the ratios).
+
+Usage: python bench/generate.py [--model DIR] [--seconds 6]
+Modes: none, post:4 (as many projections as PhysDiff's default) and physdiff:end:4,space:1; batches of 1
+and 16 motions (one caption each, from the physics prompt set); 50 DDIM steps, CFG 2.5. The model and the
+text encoder are loaded and warmed up once before timing. PhysDiff reports 2.5x none at batch 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from rich.console import Console
+from rich.table import Table
+
+from physmotion.diffusion.model import MotionDiffusion
+from physmotion.eval.physics_modes import parse_mode
+from physmotion.eval.prompts import PHYSICS_PROMPTS
+from physmotion.generate import GenerateConfig, generate
+
+MODES = ("none", "post:4", "physdiff:end:4,space:1")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--model", default=None)
+    parser.add_argument("--seconds", type=float, default=6.0)
+    args = parser.parse_args()
+    model = MotionDiffusion.load(args.model)
+    base = GenerateConfig(seconds=args.seconds)
+    generate(PHYSICS_PROMPTS[:1], parse_mode("none", base), model)  # warm-up: encoder load, first calls
+    times: dict[tuple[str, int], float] = {}
+    for batch in (1, 16):
+        for mode in MODES:
+            start = time.perf_counter()
+            generate(PHYSICS_PROMPTS[:batch], parse_mode(mode, base), model)
+            times[mode, batch] = time.perf_counter() - start
+    table = Table(title=f"generation wall time, {args.seconds:g} s motions, 50 DDIM steps")
+    for col in ("mode", "batch 1 (s)", "batch 16 (s)", "s/motion at 16", "vs none, batch 1", "vs none, batch 16"):
+        table.add_column(col, justify="left" if col == "mode" else "right")
+    for mode in MODES:
+        table.add_row(mode, f"{times[mode, 1]:.2f}", f"{times[mode, 16]:.2f}", f"{times[mode, 16] / 16:.2f}",
+                      f"{times[mode, 1] / times['none', 1]:.2f}x", f"{times[mode, 16] / times['none', 16]:.2f}x")
+    Console().print(table)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,1 @@
+"""Evaluation: prompt sets and physical comparisons of generation modes."""
