@@ -20,7 +20,7 @@ def model() -> MotionDiffusion:
 @pytest.fixture(scope="module")
 def stats(model: MotionDiffusion) -> dict[str, dict[str, float]]:
     """Per prompt, means over seeds of: root speed (m/s), vertical root range (m), highest foot joint
-    (m), wrist above the head (m), and wrist speed relative to the root (m/s)."""
+    (m), and the highest wrist above the pelvis (m)."""
     prompts = ["walk", "run", "jump", "kick", "wave"]
     res = generate(prompts, GenerateConfig(physics="none", num=SEEDS, seed=0), model)
     out = {}
@@ -31,8 +31,7 @@ def stats(model: MotionDiffusion) -> dict[str, dict[str, float]]:
             "speed": float(np.linalg.norm(np.diff(root[..., [0, 2]], axis=1), axis=-1).mean() * 20),
             "vertical": float(np.ptp(root[..., 1], axis=1).mean()),
             "foot_high": float(js[:, :, [7, 8, 10, 11], 1].max(axis=(1, 2)).mean()),
-            "wrist_over_head": float((js[:, :, [20, 21], 1] - js[:, :, [15], 1]).max(axis=(1, 2)).mean()),
-            "wrist_speed": float(np.linalg.norm(np.diff(js[:, :, [20, 21]] - js[:, :, [0]], axis=1), axis=-1).mean() * 20),
+            "wrist_over_pelvis": float((js[:, :, [20, 21], 1] - js[:, :, [0], 1]).max(axis=(1, 2)).mean()),
         }
     return out
 
@@ -45,14 +44,15 @@ def test_default_model_card_and_licence(model: MotionDiffusion) -> None:
     assert sum(p.stat().st_size for p in DEFAULT_MODEL_DIR.iterdir()) < 60e6
 
 
-def test_run_is_faster_than_walk(stats) -> None:
+def test_run_is_faster_and_bouncier_than_walk(stats) -> None:
     assert stats["run"]["speed"] > 1.5 * stats["walk"]["speed"]
     assert stats["walk"]["speed"] > 0.5  # walking goes somewhere
+    assert stats["run"]["vertical"] > 2 * stats["walk"]["vertical"]
+    assert stats["run"]["foot_high"] > stats["walk"]["foot_high"] + 0.1
 
 
-def test_wave_raises_a_hand_above_the_head(stats) -> None:
-    assert stats["wave"]["wrist_over_head"] > 0.1
-    assert stats["wave"]["wrist_over_head"] > stats["walk"]["wrist_over_head"] + 0.3
+def test_wave_raises_a_hand(stats) -> None:
+    assert stats["wave"]["wrist_over_pelvis"] > stats["walk"]["wrist_over_pelvis"] + 0.15
 
 
 def test_standing_actions_stay_in_place(stats) -> None:

@@ -66,3 +66,20 @@ def test_overfits_a_single_clip(one_clip_dir: Path, tmp_path: Path) -> None:
     assert err < 0.05 * noise_err, (err, noise_err)
     info = json.loads((tmp_path / "run" / "config.json").read_text())
     assert info["info"]["train_items"] == 8
+
+
+def test_cli_train_and_resume(built_dir: Path, tmp_path: Path) -> None:
+    from tests.test_cli import run
+
+    out = tmp_path / "cli_run"
+    common = ["train", "denoiser", "--data", built_dir, "--out", out, "--d-model", "32", "--layers", "1",
+              "--batch-size", "4", "--crop", "40"]  # fmt: skip
+    res = run(*common, "--steps", "2")
+    assert res.returncode == 0, res.stderr
+    assert "trained to step 2" in res.stdout and (out / "model.safetensors").is_file()
+    res = run(*common, "--steps", "2")
+    assert res.returncode == 1 and "--resume" in res.stderr and "Traceback" not in res.stderr
+    res = run(*common, "--steps", "3", "--resume")
+    assert res.returncode == 0 and "trained to step 3" in res.stdout
+    res = run("train", "denoiser", "--data", tmp_path / "missing", "--out", tmp_path / "x")
+    assert res.returncode == 1 and "no such dataset folder" in res.stderr
