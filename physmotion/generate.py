@@ -148,8 +148,13 @@ def write_outputs(result: GenerateResult, out: str | Path, config: GenerateConfi
             save_gif(base.with_suffix(".gif"), motion.joints, motion.fps, title=motion.texts[0])
             written.append(base.with_suffix(".gif"))
     log = result.projections
-    summary = {"config": asdict(config) | {"projection": "default"}, "files": [p.name for p in written],
-               "licence_tag": result.motions[0].licence_tag if result.motions else "",
-               "projections": {"calls": log.calls, "projected": len(log.selected), "tracked_without_fall": int(sum(log.tracked))}}  # fmt: skip
+    settings = asdict(config)
+    settings["projection"] = {"reset_on_fail": config.projection.reset_on_fail, "tau": config.projection.tau}
+    summary = {
+        "config": settings,
+        "files": [p.name for p in written],
+        "licence_tag": result.motions[0].licence_tag if result.motions else "",
+        "projections": {"calls": log.calls, "projected": len(log.selected), "without_fall": int(sum(log.tracked))},
+    }
     write_atomic(out / "generate.json", lambda f: f.write(json.dumps(summary, indent=2)), "w")
     return written

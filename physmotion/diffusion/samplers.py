@@ -18,7 +18,7 @@ import torch
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.schedule import SAMPLERS, sampling_scheduler
 from physmotion.errors import PhysmotionError
-from physmotion.text.encoder import load_text_encoder
+from physmotion.text.encoder import TextFeatures, load_text_encoder
 
 # (x0 normalised (B, T, D), lengths (B,)) -> replacement x0 of the same shape
 X0Hook = Callable[[torch.Tensor, list[int]], torch.Tensor]
@@ -102,9 +102,7 @@ def sample(
     return x
 
 
-def _doubled(text):
+def _doubled(text: TextFeatures) -> TextFeatures:
     """The text batch twice: conditional half, then the half that will be dropped (null condition)."""
-    from physmotion.text.encoder import TextFeatures
-
     return TextFeatures(torch.cat([text.tokens, text.tokens]), torch.cat([text.mask, text.mask]),
                         torch.cat([text.pooled, text.pooled]))  # fmt: skip
