@@ -81,7 +81,7 @@ def check_request(texts: Sequence[str], config: GenerateConfig, model: MotionDif
     config.sampler.check()
     if config.physics == "physdiff":
         parse_schedule(config.schedule, config.sampler.steps)
-    return int(round(config.seconds * FPS))
+    return round(config.seconds * FPS)
 
 
 def generate(

@@ -83,6 +83,6 @@ def render_frames(joints: np.ndarray, title: str = "") -> list:
 def save_gif(path: str | Path, joints: np.ndarray, fps: float, title: str = "") -> None:
     """Write an animated GIF preview of a motion atomically. joints: (T, 22, 3) metres, Y up."""
     frames = render_frames(joints, title)
-    duration = int(round(1000 / fps))
+    duration = round(1000 / fps)
     write_atomic(path, lambda f: frames[0].save(f, format="GIF", save_all=True, append_images=frames[1:],
                                                  duration=duration, loop=0))  # fmt: skip

@@ -75,7 +75,7 @@ def built_dir(built: BuildReport) -> Path:
 def tiny_config(data: Path, out: Path, **kw) -> TrainConfig:
     """A small transformer that trains in seconds on 2 CPU cores."""
     den = DenoiserConfig(d_model=kw.pop("d_model", 64), layers=kw.pop("layers", 2), heads=4, dropout=0.1)
-    base = dict(batch_size=8, crop=64, steps=20, lr=1e-3, warmup=5, log_every=5, checkpoint_minutes=60.0)
+    base = {"batch_size": 8, "crop": 64, "steps": 20, "lr": 1e-3, "warmup": 5, "log_every": 5, "checkpoint_minutes": 60.0}
     base.update(kw)
     return TrainConfig(data=str(data), out=str(out), denoiser=den, **base)
 

@@ -40,7 +40,7 @@ def parse_schedule(spec: str, steps: int) -> list[int]:
         raise PhysmotionError(f"bad schedule {spec!r}: numbers must not be negative")
     keys = set(values)
     if keys == {"uniform"}:
-        ts = {int(round(x)) for x in np.linspace(0, 0.9 * steps, values["uniform"])} if values["uniform"] else set()
+        ts = {round(x) for x in np.linspace(0, 0.9 * steps, values["uniform"])} if values["uniform"] else set()
     elif keys == {"start", "end"}:
         ts = {steps - 1 - k for k in range(values["start"])} | set(range(values["end"]))
     elif keys == {"end", "space"}:

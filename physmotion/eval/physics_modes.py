@@ -7,8 +7,8 @@ A mode string is what ``physmotion generate`` spells with two options: ``post:4`
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import replace
-from typing import Sequence
 
 import numpy as np
 
