@@ -89,13 +89,21 @@ def generate(
     config: GenerateConfig | None = None,
     model: MotionDiffusion | None = None,
     on_step: Callable[[int, int], None] | None = None,
+    lengths: Sequence[int] | None = None,
 ) -> GenerateResult:
-    """Generate ``config.num`` motions per text. Deterministic under ``config.seed``."""
+    """Generate ``config.num`` motions per text. Deterministic under ``config.seed``.
+
+    lengths: frames per text (evaluation matches the test motions' lengths); default ``config.seconds``.
+    """
     cfg = config or GenerateConfig()
     model = model or MotionDiffusion.load()
     frames = check_request(texts, cfg, model)
+    if lengths is None:
+        lengths = [frames] * len(texts)
+    elif len(lengths) != len(texts) or not all(MIN_FRAMES // 2 <= n <= model.denoiser.max_frames for n in lengths):
+        raise PhysmotionError(f"give one length per text, each {MIN_FRAMES // 2}..{model.denoiser.max_frames} frames")
     prompts = [t.strip() for t in texts for _ in range(cfg.num)]
-    lengths = [frames] * len(prompts)
+    lengths = [int(n) for n in lengths for _ in range(cfg.num)]
     projector = FeatureProjector(model, cfg.projection)
     hook_steps = parse_schedule(cfg.schedule, cfg.sampler.steps) if cfg.physics == "physdiff" else []
     total = cfg.sampler.steps + (cfg.post_projections if cfg.physics == "post" else 0)
@@ -103,6 +111,7 @@ def generate(
     x = sample(model, prompts, lengths, cfg.sampler, seed=cfg.seed,
                hook=projector if hook_steps else None, hook_steps=hook_steps, on_step=report)  # fmt: skip
     feats = model.normalizer.denormalize(x.float().cpu().numpy())
+    feats = [f[:n] for f, n in zip(feats, lengths)]
     joints = [recover_from_ric(f.astype(np.float64)) for f in feats]
     if cfg.physics == "physdiff" and hook_steps[-1:] == [cfg.sampler.steps - 1]:
         # The last step was projected, and DDIM's last step returns x0 itself: the output is P's

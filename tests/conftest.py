@@ -114,3 +114,23 @@ def tiny_model(tiny_model_dir: Path):
     from physmotion.diffusion.model import MotionDiffusion
 
     return MotionDiffusion.load(tiny_model_dir)
+
+
+@pytest.fixture(scope="session")
+def tiny_evaluator_dir(built_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A small evaluator trained for 3 epochs on the bundled data: real weights, a weak evaluator."""
+    from physmotion.eval.evaluator import EvaluatorConfig
+    from physmotion.eval.train import EvaluatorTrainConfig, train_evaluator
+
+    out = tmp_path_factory.mktemp("tiny_evaluator") / "evaluator"
+    cfg = EvaluatorTrainConfig(data=str(built_dir), out=str(out), epochs=3, eval_every=1, eval_repeats=2, lr=5e-4,
+                               evaluator=EvaluatorConfig(d_model=32, motion_layers=1, text_layers=1, latent_dim=16))
+    train_evaluator(cfg, progress=False)
+    return out
+
+
+@pytest.fixture(scope="session")
+def tiny_evaluator(tiny_evaluator_dir: Path):
+    from physmotion.eval.evaluator import Evaluator
+
+    return Evaluator.load(tiny_evaluator_dir)

@@ -15,7 +15,6 @@ The output folder holds the model for sampling (EMA weights, :class:`MotionDiffu
 from __future__ import annotations
 
 import json
-import math
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -31,6 +30,7 @@ from physmotion.diffusion.schedule import DiffusionConfig, training_scheduler
 from physmotion.errors import PhysmotionError
 from physmotion.motion import write_atomic
 from physmotion.text.encoder import load_text_encoder
+from physmotion.training import batch_indices, loss_bar, seeded_generator
 
 STATE_FILE = "train_state.pt"
 LOSS_FILE = "loss.csv"
@@ -67,18 +67,6 @@ class TrainResult:
     step: int
     losses: list[tuple[int, float]]  # (step, mean loss over the last log_every steps)
     seconds: float
-
-
-def _rng(seed: int, *key: int) -> torch.Generator:
-    return torch.Generator().manual_seed(int(np.random.SeedSequence([seed, *key]).generate_state(1)[0]))
-
-
-def _batch_indices(n: int, batch: int, seed: int, step: int) -> tuple[int, list[int]]:
-    """(epoch, dataset indices) of the batch at ``step``: epoch-wise permutations, last partial batch dropped."""
-    per_epoch = max(n // batch, 1)
-    epoch, k = divmod(step, per_epoch)
-    perm = torch.randperm(n, generator=_rng(seed, 1, epoch)).tolist()
-    return epoch, perm[k * batch : (k + 1) * batch] if n >= batch else perm
 
 
 def masked_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
@@ -128,15 +116,15 @@ def train_denoiser(cfg: TrainConfig, resume: bool = False, progress: bool = True
 
     t0 = last_save = time.monotonic()
     window: list[float] = []
-    bar = _progress(progress, cfg.steps, step)
+    bar = loss_bar(progress, cfg.steps, step)
     net.train()
     while step < cfg.steps:
-        epoch, idx = _batch_indices(len(dataset), cfg.batch_size, cfg.seed, step)
+        epoch, idx = batch_indices(len(dataset), cfg.batch_size, cfg.seed, step)
         dataset.set_epoch(epoch)
         batch = collate([dataset[i] for i in idx])
         x0, mask = batch["motion"].to(accel.device), batch["mask"].to(accel.device)
         text = encoder.encode(batch["text"]).to(accel.device)
-        g = _rng(cfg.seed, 2, step)
+        g = seeded_generator(cfg.seed, 2, step)
         t = torch.randint(0, cfg.diffusion.num_train_timesteps, (len(idx),), generator=g)
         noise = torch.randn(x0.shape, generator=g)
         drop = torch.rand(len(idx), generator=g) < cfg.text_drop
@@ -192,25 +180,3 @@ def _summary(cfg: TrainConfig) -> dict:
     d = asdict(cfg)
     d.pop("denoiser"), d.pop("diffusion")
     return d
-
-
-class _Bar:
-    """A rich progress bar with loss and ETA."""
-
-    def __init__(self, total: int, start: int) -> None:
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-
-        self.progress = Progress(TextColumn("training"), BarColumn(), MofNCompleteColumn(),
-                                 TextColumn("loss {task.fields[loss]:.4f}"), TimeRemainingColumn())  # fmt: skip
-        self.task = self.progress.add_task("train", total=total, completed=start, loss=math.nan)
-        self.progress.start()
-
-    def update(self, step: int, loss: float) -> None:
-        self.progress.update(self.task, completed=step, loss=loss)
-
-    def close(self) -> None:
-        self.progress.stop()
-
-
-def _progress(enabled: bool, total: int, start: int) -> _Bar | None:
-    return _Bar(total, start) if enabled else None

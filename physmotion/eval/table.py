@@ -1,0 +1,293 @@
+"""The papers' tables on our data: generation metrics with our evaluator plus every physical metric, one
+row per generation mode (PhysDiff Tables 1 and 4, Morph Table 2), and a reference row for real motions.
+
+Protocol (Guo et al. 2022, as run by MDM's ``eval/eval_humanml.py``), scaled to our split:
+- every motion of the split is generated once per repeat, from one of its captions and at its length;
+  each motion's caption is drawn once (seeded) and kept for every repeat and mode, so modes are compared
+  on the same requests and the repeats give MultiModality's several generations per text;
+- FID: generated embeddings against the real motions' embeddings;
+- R-Precision top 1/2/3 and MM-Dist: captions against the generated motions in shuffled batches of 32
+  (an incomplete last batch is dropped);
+- Diversity: mean distance between random pairs of generated motions (300 pairs, at most N);
+- MultiModality: mean distance between generations of the same caption across repeats;
+- every figure is the mean over ``repeats`` runs with a 95% interval (1.96 std / sqrt(repeats)), except
+  MultiModality, whose interval is over captions.
+The real row uses HumanML3D's evaluation crops of the real motions (lengths rounded down to multiples of
+4, one unit shorter a third of the time, random start), so its FID is close to, not exactly, zero.
+
+Physical metrics use the humanoid's collision geometry (:class:`HumanoidSurface`) by default. ``ifr`` is
+the fraction of motions whose last projection had to reset the humanoid (it fell, MPJPE > 0.2 m): Morph's
+imitation failure rate at our sampling threshold.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from physmotion.conventions import FPS
+from physmotion.data.dataset import MotionItem, load_items
+from physmotion.diffusion.model import MotionDiffusion
+from physmotion.diffusion.physdiff import joints_to_features, on_data_floor, parse_schedule
+from physmotion.errors import PhysmotionError
+from physmotion.eval.evaluator import Evaluator
+from physmotion.eval.physics_modes import parse_mode
+from physmotion.features.humanml3d import recover_from_ric
+from physmotion.generate import GenerateConfig, generate
+from physmotion.metrics import physical_metrics
+from physmotion.metrics.generation import (
+    confidence_interval,
+    diversity,
+    fid,
+    multimodality_per_text,
+    r_precision,
+)
+from physmotion.motion import write_atomic
+
+REAL = "real"
+GENERATION_COLUMNS = ("R@1", "R@2", "R@3", "FID", "MM-Dist", "Diversity", "MModality", "sec/motion")
+BETTER = {"R@1": "↑", "R@2": "↑", "R@3": "↑", "FID": "↓", "MM-Dist": "↓", "Diversity": "→", "MModality": "↑",
+          "sec/motion": "↓"}  # fmt: skip
+
+
+@dataclass
+class EvaluateConfig:
+    """One evaluation run. ``quick()`` is the smoke-test preset."""
+
+    modes: tuple[str, ...] = ("none", "post:1", "post:4", "physdiff:end:4,space:1")
+    split: str = "test"
+    repeats: int = 3  # Guo: 20; one repeat of four modes costs minutes here
+    max_motions: int | None = None  # a seeded subset of the split
+    batch_size: int = 32  # R-Precision batch
+    generate_batch: int = 16  # motions per sampling call
+    diversity_times: int = 300
+    mm_times: int = 10
+    surface: str = "humanoid"
+    seed: int = 0
+    base: GenerateConfig = field(default_factory=GenerateConfig)
+
+    @classmethod
+    def quick(cls, **kw) -> EvaluateConfig:
+        """32 motions, 2 repeats, 10 DDIM steps: a smoke run that exercises every code path."""
+        base = GenerateConfig()
+        base.sampler = replace(base.sampler, steps=10)
+        return cls(**{"repeats": 2, "max_motions": 32, "base": base, **kw})
+
+
+@dataclass
+class EvalTable:
+    """Rows: name -> metric -> (mean, 95% half-width). ``meta``: what was evaluated, how."""
+
+    rows: dict[str, dict[str, tuple[float, float]]]
+    meta: dict
+
+    def to_json(self) -> str:
+        rows = {r: {m: {"mean": v[0], "ci95": v[1]} for m, v in vals.items()} for r, vals in self.rows.items()}
+        return json.dumps({"meta": self.meta, "rows": rows}, indent=2)
+
+    def physical_columns(self) -> list[str]:
+        from physmotion.metrics.physical import METRICS
+
+        return [m for m in METRICS if any(m in r for r in self.rows.values())]
+
+    def to_markdown(self) -> str:
+        from physmotion.metrics.physical import METRICS
+
+        lines = [_markdown_table(self.rows, [(c, f"{c} {BETTER[c]}") for c in GENERATION_COLUMNS]), ""]
+        phys = [(c, f"{c} ({METRICS[c].unit})") for c in self.physical_columns()]
+        lines.append(_markdown_table(self.rows, phys))
+        return "\n".join(lines) + "\n"
+
+    def write(self, stem: str | Path) -> list[Path]:
+        """Write ``<stem>.md`` and ``<stem>.json`` atomically."""
+        stem = Path(stem)
+        stem.parent.mkdir(parents=True, exist_ok=True)
+        md, js = stem.with_suffix(".md"), stem.with_suffix(".json")
+        write_atomic(md, lambda f: f.write(_markdown_header(self.meta) + self.to_markdown()), "w")
+        write_atomic(js, lambda f: f.write(self.to_json()), "w")
+        return [md, js]
+
+
+def split_modes(spec: str) -> list[str]:
+    """``"none,post:1,physdiff:end:4,space:1"`` -> ["none", "post:1", "physdiff:end:4,space:1"].
+
+    A schedule's own commas stay with it: a piece that does not start a mode joins the one before.
+    """
+    modes: list[str] = []
+    for piece in (p.strip() for p in spec.split(",")):
+        if not piece:
+            continue
+        if piece.split(":")[0] in ("none", "post", "physdiff") or not modes:
+            modes.append(piece)
+        else:
+            modes[-1] += "," + piece
+    if not modes:
+        raise PhysmotionError("no physics mode given: e.g. --physics none,post:1,physdiff:end:4,space:1")
+    return modes
+
+
+def evaluate(
+    model: MotionDiffusion,
+    evaluator: Evaluator,
+    data: str | Path,
+    config: EvaluateConfig | None = None,
+    on_progress: Callable[[int, int], None] | None = None,
+) -> EvalTable:
+    """The table for ``config.modes`` on ``data``'s split, with a real-data row first."""
+    cfg = config or EvaluateConfig()
+    gen_configs = {mode: parse_mode(mode, cfg.base) for mode in cfg.modes}  # bad modes fail before any work
+    for gen_cfg in gen_configs.values():
+        if gen_cfg.physics == "physdiff":
+            parse_schedule(gen_cfg.schedule, gen_cfg.sampler.steps)
+    if cfg.repeats < 1:
+        raise PhysmotionError("--repeats must be at least 1")
+    items = _items(data, cfg, model.denoiser.max_frames)
+    captions = _captions(items, cfg.seed)
+    real_emb = evaluator.encode_motions([it.features for it in items])
+    text_emb = evaluator.encode_texts(captions)
+    body = _surface(cfg.surface)
+    total, done = cfg.repeats * len(items) * len(cfg.modes), 0
+
+    rows: dict[str, dict[str, tuple[float, float]]] = {}
+    runs = [_real_run(evaluator, items, r, cfg, real_emb, text_emb, body) for r in range(cfg.repeats)]
+    rows[REAL] = _summarise(runs, None)
+    for mode, gen_cfg in gen_configs.items():
+        runs, per_text = [], []
+        for r in range(cfg.repeats):
+            run_cfg = replace(gen_cfg, seed=cfg.seed + 1000 * r)
+
+            def tick(n: int, _done: int = done) -> None:
+                if on_progress:
+                    on_progress(_done + n, total)
+
+            joints, seconds, fell = _generate(model, captions, items, run_cfg, cfg.generate_batch, tick)
+            done += len(items)
+            emb = evaluator.encode_motions([joints_to_features(on_data_floor(j)) for j in joints])
+            run = _scores(emb, text_emb, real_emb, r, cfg)
+            run.update(_physical(joints, body))
+            run["sec/motion"] = seconds / len(items)
+            if fell is not None:
+                run["ifr"] = fell
+            runs.append(run)
+            per_text.append(emb)
+        rows[mode] = _summarise(runs, np.stack(per_text, axis=1) if cfg.repeats > 1 else None)
+    meta = {"split": cfg.split, "motions": len(items), "repeats": cfg.repeats, "modes": list(cfg.modes),
+            "model": model.info.get("data", ""), "model_steps": model.info.get("steps"),
+            "model_licence": model.licence_tag, "evaluator_licence": evaluator.licence_tag,
+            "sampler": asdict(cfg.base.sampler), "surface": cfg.surface, "seed": cfg.seed,
+            "data": str(data)}  # fmt: skip
+    return EvalTable(rows=rows, meta=meta)
+
+
+# ------------------------------------------------------------------------------------------------
+
+
+def _items(data: str | Path, cfg: EvaluateConfig, max_frames: int) -> list[MotionItem]:
+    items = load_items(data, cfg.split, max_frames=max_frames)
+    if cfg.max_motions is not None and cfg.max_motions < len(items):
+        keep = np.sort(np.random.default_rng(cfg.seed).choice(len(items), cfg.max_motions, replace=False))
+        items = [items[i] for i in keep]
+    if len(items) < cfg.batch_size:
+        raise PhysmotionError(f"{data}: split '{cfg.split}' has {len(items)} usable motions; "
+                              f"R-Precision needs at least {cfg.batch_size}")  # fmt: skip
+    return items
+
+
+def _captions(items: list[MotionItem], seed: int) -> list[str]:
+    rng = np.random.default_rng((seed, 1))
+    return [it.captions[rng.integers(len(it.captions))] for it in items]
+
+
+def _surface(name: str):
+    if name == "humanoid":
+        from physmotion.physics.surface import HumanoidSurface
+
+        return HumanoidSurface()
+    if name == "joints":
+        return None
+    raise PhysmotionError(f"unknown surface {name!r}: humanoid or joints")
+
+
+def _crop(features: np.ndarray, rng: np.random.Generator, unit: int = 4) -> np.ndarray:
+    """HumanML3D's evaluation crop: length down to a multiple of ``unit``, one unit less a third of the time."""
+    units = len(features) // unit
+    if rng.integers(3) == 2 and units > 1:
+        units -= 1
+    length = units * unit
+    start = int(rng.integers(len(features) - length + 1))
+    return features[start : start + length]
+
+
+def _real_run(evaluator, items, r, cfg, real_emb, text_emb, body) -> dict[str, float]:
+    rng = np.random.default_rng((cfg.seed, 2, r))
+    crops = [_crop(it.features, rng) for it in items]
+    run = _scores(evaluator.encode_motions(crops), text_emb, real_emb, r, cfg)
+    run.update(_physical([recover_from_ric(it.features.astype(np.float64)) for it in items], body))
+    return run
+
+
+def _generate(model, captions, items, gen_cfg, batch, tick) -> tuple[list[np.ndarray], float, float | None]:
+    """Final joints of every motion, wall seconds, and the fraction whose last projection fell."""
+    joints: list[np.ndarray] = []
+    fell: list[bool] = []
+    start = time.perf_counter()
+    for i in range(0, len(items), batch):
+        chunk = slice(i, i + batch)
+        lengths = [len(it.features) for it in items[chunk]]
+        out = generate(captions[chunk], replace(gen_cfg, seed=gen_cfg.seed + i), model, lengths=lengths)
+        joints += [m.joints for m in out.motions]
+        if out.projections.tracked:
+            fell += [not t for t in out.projections.tracked[-len(lengths) :]]
+        tick(len(joints))
+    return joints, time.perf_counter() - start, (float(np.mean(fell)) if fell else None)
+
+
+def _scores(emb, text_emb, real_emb, r, cfg) -> dict[str, float]:
+    """FID, R@1-3, MM-Dist and Diversity of one run; R-Precision batches are shuffled per repeat."""
+    order = np.random.default_rng((cfg.seed, 3, r)).permutation(len(emb))
+    acc, mm_dist = r_precision(text_emb[order], emb[order], top_k=3, batch_size=cfg.batch_size)
+    return {"R@1": float(acc[0]), "R@2": float(acc[1]), "R@3": float(acc[2]), "FID": fid(real_emb, emb),
+            "MM-Dist": mm_dist, "Diversity": diversity(emb, cfg.diversity_times, seed=cfg.seed + r)}  # fmt: skip
+
+
+def _physical(joints: Sequence[np.ndarray], body) -> dict[str, float]:
+    lengths = [len(j) for j in joints]
+    padded = np.zeros((len(joints), max(lengths), 22, 3))
+    for i, j in enumerate(joints):
+        padded[i, : len(j)] = j
+        padded[i, len(j) :] = j[-1]
+    return physical_metrics(padded, FPS, lengths=lengths, body=body)
+
+
+def _summarise(runs: list[dict[str, float]], per_text: np.ndarray | None) -> dict[str, tuple[float, float]]:
+    """Mean and 95% half-width over runs; MultiModality from per_text (N, repeats, D) over captions."""
+    out = {k: confidence_interval([run[k] for run in runs]) for k in runs[0]}
+    if per_text is not None:
+        out["MModality"] = confidence_interval(multimodality_per_text(per_text))
+    return out
+
+
+def _fmt(value: tuple[float, float] | None, column: str) -> str:
+    if value is None:
+        return "-"
+    digits = 2 if column in ("sec/motion",) or value[0] >= 10 else 3
+    return f"{value[0]:.{digits}f} ± {value[1]:.{digits}f}" if value[1] > 0 else f"{value[0]:.{digits}f}"
+
+
+def _markdown_table(rows: dict, columns: list[tuple[str, str]]) -> str:
+    head = "| | " + " | ".join(label for _, label in columns) + " |"
+    sep = "|---|" + "---:|" * len(columns)
+    body = ["| " + name + " | " + " | ".join(_fmt(vals.get(c), c) for c, _ in columns) + " |"
+            for name, vals in rows.items()]  # fmt: skip
+    return "\n".join([head, sep, *body])
+
+
+def _markdown_header(meta: dict) -> str:
+    return (f"Split `{meta['split']}` ({meta['motions']} motions), {meta['repeats']} repeats, "
+            f"mean ± 95% interval. Sampler: {meta['sampler']['sampler']} {meta['sampler']['steps']} steps, "
+            f"CFG {meta['sampler']['cfg_scale']}. Physical metrics on the {meta['surface']} surface.\n\n")  # fmt: skip

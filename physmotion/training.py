@@ -1,0 +1,51 @@
+"""Pieces every training loop here shares: seeded per-step randomness, epoch-wise batches, a loss bar.
+
+Exact resumption without saving RNG streams: the batch order of epoch e is a permutation drawn from
+``(seed, e)``, and a step's randomness comes from generators seeded by ``(seed, step)``, so a resumed run
+replays exactly the steps an uninterrupted run takes.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+
+def seeded_generator(seed: int, *key: int) -> torch.Generator:
+    """A torch generator for the stream named by ``(seed, *key)``."""
+    return torch.Generator().manual_seed(int(np.random.SeedSequence([seed, *key]).generate_state(1)[0]))
+
+
+def batch_indices(n: int, batch: int, seed: int, step: int) -> tuple[int, list[int]]:
+    """(epoch, dataset indices) of the batch at ``step``: epoch-wise permutations, the last partial
+    batch dropped."""
+    per_epoch = max(n // batch, 1)
+    epoch, k = divmod(step, per_epoch)
+    perm = torch.randperm(n, generator=seeded_generator(seed, 1, epoch)).tolist()
+    return epoch, perm[k * batch : (k + 1) * batch] if n >= batch else perm
+
+
+class LossBar:
+    """A rich progress bar with the running loss and ETA."""
+
+    def __init__(self, total: int, start: int, label: str = "training") -> None:
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+        columns = (TextColumn(label), BarColumn(), MofNCompleteColumn(),
+                   TextColumn("loss {task.fields[loss]:.4f}"), TimeRemainingColumn())  # fmt: skip
+        self.progress = Progress(*columns)
+        self.task = self.progress.add_task(label, total=total, completed=start, loss=math.nan)
+        self.progress.start()
+
+    def update(self, step: int, loss: float) -> None:
+        self.progress.update(self.task, completed=step, loss=loss)
+
+    def close(self) -> None:
+        self.progress.stop()
+
+
+def loss_bar(enabled: bool, total: int, start: int, label: str = "training") -> LossBar | None:
+    """A :class:`LossBar`, or None when progress is off (not a terminal, tests)."""
+    return LossBar(total, start, label) if enabled else None

@@ -1,0 +1,32 @@
+"""The projection-schedule study (PhysDiff Fig. 4) end to end on a tiny model: rows, files, the plot."""
+
+import pytest
+from PIL import Image
+
+from physmotion.diffusion.samplers import SamplerConfig
+from physmotion.errors import PhysmotionError
+from physmotion.eval.schedule_study import mode_for, schedule_study, write_study
+from physmotion.eval.table import EvaluateConfig
+from physmotion.generate import GenerateConfig
+
+
+def test_mode_for_counts():
+    assert mode_for(0) == "none"
+    assert mode_for(4) == "physdiff:end:4,space:1"
+
+
+def test_study_writes_table_json_and_png(tiny_model, tiny_evaluator, built_dir, tmp_path):
+    cfg = EvaluateConfig(repeats=1, max_motions=32, base=GenerateConfig(sampler=SamplerConfig(steps=4)))
+    table = schedule_study(tiny_model, tiny_evaluator, built_dir, [0, 2], cfg)
+    assert list(table.rows) == ["real", "0", "2"]
+    assert table.rows["2"]["phys_err"][0] < table.rows["0"]["phys_err"][0]
+    md, js, png = write_study(table, tmp_path / "study")
+    assert md.read_text().count("\n| ") >= 6 and js.stat().st_size > 0
+    with Image.open(png) as img:
+        assert img.format == "PNG" and img.size[0] > 400
+
+
+def test_counts_outside_the_sampling_steps_are_refused(tiny_model, tiny_evaluator, built_dir):
+    cfg = EvaluateConfig(repeats=1, base=GenerateConfig(sampler=SamplerConfig(steps=4)))
+    with pytest.raises(PhysmotionError, match="0..4"):
+        schedule_study(tiny_model, tiny_evaluator, built_dir, [0, 5], cfg)

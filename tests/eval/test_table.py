@@ -1,0 +1,64 @@
+"""The evaluation table: mode parsing, the real-data row, and a quick run with real (tiny) models."""
+
+import json
+
+import numpy as np
+import pytest
+
+from physmotion.diffusion.samplers import SamplerConfig
+from physmotion.errors import PhysmotionError
+from physmotion.eval.table import REAL, EvaluateConfig, evaluate, split_modes
+from physmotion.generate import GenerateConfig
+
+
+def test_split_modes_keeps_schedule_commas():
+    assert split_modes("none,post:1,post:4,physdiff:end:4,space:1") == [
+        "none", "post:1", "post:4", "physdiff:end:4,space:1"]  # fmt: skip
+    assert split_modes("physdiff:start:2,end:2, physdiff:uniform:4") == ["physdiff:start:2,end:2", "physdiff:uniform:4"]
+    with pytest.raises(PhysmotionError):
+        split_modes(" , ")
+
+
+@pytest.fixture(scope="module")
+def quick_table(tiny_model, tiny_evaluator, built_dir):
+    base = GenerateConfig(sampler=SamplerConfig(steps=5))
+    cfg = EvaluateConfig(modes=("none", "post:1", "physdiff:end:1,space:1"), repeats=2, max_motions=32, base=base)
+    return evaluate(tiny_model, tiny_evaluator, built_dir, cfg)
+
+
+def test_quick_table_has_every_row_and_metric(quick_table):
+    assert list(quick_table.rows) == [REAL, "none", "post:1", "physdiff:end:1,space:1"]
+    for name, row in quick_table.rows.items():
+        for key in ("R@1", "R@2", "R@3", "FID", "MM-Dist", "Diversity", "penetrate", "float", "skate", "phys_err"):
+            mean, half = row[key]
+            assert np.isfinite(mean) and half >= 0, (name, key)
+        assert row["R@1"][0] <= row["R@2"][0] <= row["R@3"][0]
+        if name != REAL:
+            assert row["sec/motion"][0] > 0
+            assert 0 < row["MModality"][0] < 2  # unit embeddings: distances below 2
+    assert "ifr" in quick_table.rows["post:1"] and "ifr" not in quick_table.rows["none"]
+    assert quick_table.meta["motions"] == 32 and quick_table.meta["repeats"] == 2
+
+
+def test_real_row_fid_is_near_zero_and_physics_lowers_phys_err(quick_table):
+    real_fid = quick_table.rows[REAL]["FID"][0]
+    assert real_fid < 0.2 * quick_table.rows["none"]["FID"][0]
+    # A 5-step tiny model makes motions far from physical; one projection fixes much of it.
+    assert quick_table.rows["post:1"]["phys_err"][0] < quick_table.rows["none"]["phys_err"][0]
+
+
+def test_table_writes_markdown_and_json(quick_table, tmp_path):
+    md, js = quick_table.write(tmp_path / "results" / "quick")
+    text = md.read_text()
+    assert "| real |" in text and "| physdiff:end:1,space:1 |" in text and "FID ↓" in text
+    data = json.loads(js.read_text())
+    assert data["rows"]["none"]["FID"]["mean"] == pytest.approx(quick_table.rows["none"]["FID"][0])
+    assert not list(tmp_path.rglob("*.tmp"))
+
+
+def test_bad_modes_fail_before_any_work(tiny_model, tiny_evaluator, built_dir):
+    for modes in (("walk",), ("physdiff:end:60,space:1",), ("post:x",)):
+        with pytest.raises(PhysmotionError):
+            evaluate(tiny_model, tiny_evaluator, built_dir, EvaluateConfig(modes=modes))
+    with pytest.raises(PhysmotionError, match="no split"):
+        evaluate(tiny_model, tiny_evaluator, built_dir, EvaluateConfig(split="nosuch"))
