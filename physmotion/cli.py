@@ -239,7 +239,7 @@ def train_denoiser_cmd(
 def train_evaluator_cmd(
     data: Path = typer.Option(..., help="HumanML3D-layout folder with train (and val, test) splits."),
     out: Path = typer.Option(..., help="Output evaluator folder."),
-    epochs: int = typer.Option(200, help="Epochs over the train split; the best on val is kept."),
+    epochs: int = typer.Option(150, help="Epochs over the train split; the best on val is kept."),
     batch_size: int = typer.Option(32, help="Batch size (contrastive negatives per caption)."),
     lr: float = typer.Option(1e-4, help="AdamW learning rate."),
     latent_dim: int = typer.Option(64, help="Embedding width."),

@@ -15,7 +15,7 @@ from pathlib import Path
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.errors import PhysmotionError
 from physmotion.eval.evaluator import Evaluator
-from physmotion.eval.table import EvaluateConfig, EvalTable, evaluate
+from physmotion.eval.table import EvalTable, EvaluateConfig, evaluate
 from physmotion.motion import write_atomic
 
 DEFAULT_COUNTS = (0, 1, 2, 4, 8, 20, 50)
@@ -56,7 +56,7 @@ def plot_study(table: EvalTable, path: str | Path) -> Path:
         raise PhysmotionError("the plot needs matplotlib: pip install 'physmotion[plot]'") from None
     counts = [int(k) for k in table.rows if k != "real"]
     fig, axes = plt.subplots(1, len(PLOTTED), figsize=(4 * len(PLOTTED), 3.2))
-    for ax, (key, label) in zip(axes, PLOTTED):
+    for ax, (key, label) in zip(axes, PLOTTED, strict=True):
         means = [table.rows[str(n)][key][0] for n in counts]
         half = [table.rows[str(n)][key][1] for n in counts]
         ax.errorbar(counts, means, yerr=half, marker="o", capsize=3)
@@ -64,7 +64,7 @@ def plot_study(table: EvalTable, path: str | Path) -> Path:
             ax.axhline(table.rows["real"][key][0], color="grey", linestyle="--", label="real data")
             ax.legend(fontsize=8)
         ax.set_xscale("symlog", linthresh=1)
-        ax.set_xlabel("projection steps (of %d)" % table.meta["sampler"]["steps"])
+        ax.set_xlabel(f"projection steps (of {table.meta['sampler']['steps']})")
         ax.set_title(label)
     fig.tight_layout()
     path = Path(path)
