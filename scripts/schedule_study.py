@@ -14,8 +14,8 @@ import sys
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.errors import PhysmotionError
 from physmotion.eval.evaluator import Evaluator
-from physmotion.eval.schedule_study import DEFAULT_COUNTS, schedule_study, write_study
-from physmotion.eval.table import EvaluateConfig
+from physmotion.eval.schedule_study import DEFAULT_COUNTS, plot_study, schedule_study, write_study
+from physmotion.eval.table import EvalTable, EvaluateConfig
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -30,8 +30,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=1)
     parser.add_argument("--steps", type=int, default=50, help="DDIM steps")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--plot-only", action="store_true", help="redraw <out>.png from <out>.json")
     args = parser.parse_args(argv)
     try:
+        if args.plot_only:
+            print("wrote", plot_study(EvalTable.from_json(f"{args.out}.json"), f"{args.out}.png"))
+            return 0
         counts = [int(c) for c in args.counts.split(",")]
         cfg = EvaluateConfig(split=args.split, repeats=args.repeats, max_motions=args.motions, seed=args.seed)
         cfg.base.sampler.steps = args.steps

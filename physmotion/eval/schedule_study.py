@@ -63,7 +63,9 @@ def plot_study(table: EvalTable, path: str | Path) -> Path:
         if key in table.rows["real"]:
             ax.axhline(table.rows["real"][key][0], color="grey", linestyle="--", label="real data")
             ax.legend(fontsize=8)
-        ax.set_xscale("symlog", linthresh=1)
+        ax.set_xscale("symlog", linthresh=1)  # 0 and 50 on one axis
+        ax.set_xlim(-0.3, max(counts) * 1.3)
+        ax.set_xticks(counts, [str(n) for n in counts])
         ax.set_xlabel(f"projection steps (of {table.meta['sampler']['steps']})")
         ax.set_title(label)
     fig.tight_layout()

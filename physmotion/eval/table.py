@@ -90,6 +90,16 @@ class EvalTable:
         rows = {r: {m: {"mean": v[0], "ci95": v[1]} for m, v in vals.items()} for r, vals in self.rows.items()}
         return json.dumps({"meta": self.meta, "rows": rows}, indent=2)
 
+    @classmethod
+    def from_json(cls, path: str | Path) -> EvalTable:
+        """Read a table written by :meth:`write` (``<stem>.json``)."""
+        try:
+            data = json.loads(Path(path).read_text())
+            rows = {r: {m: (v["mean"], v["ci95"]) for m, v in vals.items()} for r, vals in data["rows"].items()}
+            return cls(rows=rows, meta=data["meta"])
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+            raise PhysmotionError(f"{path}: not an evaluation table ({type(exc).__name__})") from None
+
     def physical_columns(self) -> list[str]:
         from physmotion.metrics.physical import METRICS
 

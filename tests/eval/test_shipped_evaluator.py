@@ -38,5 +38,5 @@ def test_real_test_data_against_itself_has_fid_near_zero(shipped, tiny_model, bu
     train = shipped.encode_motions([it.features for it in load_items(built_dir, "train")])
     other = fid(test, train)  # different motions of the same collection: measured 0.17
     assert real_fid < 0.02 * other, (real_fid, other)
-    assert fid(test, test) == pytest.approx(0.0, abs=1e-9)
+    assert abs(fid(test, test)) < 1e-6  # exactly zero up to the matrix square root's rounding
     assert table.rows[REAL]["R@3"][0] > 0.6 and np.isfinite(table.rows[REAL]["Diversity"][0])
