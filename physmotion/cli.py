@@ -289,7 +289,7 @@ def evaluate_cmd(
     with _step_bar("evaluating") as tick:
         table = evaluate(net, judge, data, cfg, on_progress=tick)
     paths = table.write(out)
-    console.print(table.to_markdown(), highlight=False)
+    console.print(table.to_markdown(), highlight=False, markup=False, emoji=False)
     console.print("wrote " + ", ".join(str(p) for p in paths), highlight=False)
 
 
