@@ -202,6 +202,7 @@ class HumanoidConfig:
     armature: float = 0.01  # kg m^2 added to every hinge (PHC's value) ...
     armature_feet: float = 0.03  # ... and to ankle and toe hinges instead: see the class docstring
     friction: tuple[float, float, float] = (1.0, 0.005, 0.0001)  # sliding, torsional, rolling
+    contact_solref: tuple[float, float] = (0.02, 1.0)  # MuJoCo's default: time constant (s), damping ratio
     integrator: str = "implicitfast"  # Euler blows up: the actuators' kv is only implicit there
     solver: str = "Newton"
     iterations: int = 50
@@ -435,12 +436,12 @@ def build_mjcf(offsets: np.ndarray | None = None, config: HumanoidConfig | None 
         "  <default>",
         f'    <joint type="hinge" armature="{cfg.armature:g}" damping="0"'
         f' limited="{str(cfg.joint_limits).lower()}"/>',
-        f'    <geom condim="3" friction="{_fmt(fr)}" contype="1" conaffinity="{int(cfg.self_collision)}" '
-        'rgba="0.8 0.6 0.4 1"/>',
+        f'    <geom condim="3" friction="{_fmt(fr)}" solref="{_fmt(cfg.contact_solref)}" contype="1" '
+        f'conaffinity="{int(cfg.self_collision)}" rgba="0.8 0.6 0.4 1"/>',
         "  </default>",
         "  <worldbody>",
-        f'    <geom name="floor" type="plane" size="0 0 0.05" friction="{_fmt(fr)}" contype="0" conaffinity="1" '
-        'rgba="0.8 0.9 0.8 1"/>',
+        f'    <geom name="floor" type="plane" size="0 0 0.05" friction="{_fmt(fr)}" '
+        f'solref="{_fmt(cfg.contact_solref)}" contype="0" conaffinity="1" rgba="0.8 0.9 0.8 1"/>',
     ]
     actuators: list[str] = []
 

@@ -8,6 +8,7 @@ state), see shared/notes/tracking-controller.md §4. ``bench/physics.py`` compar
 
 from __future__ import annotations
 
+import math
 import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -91,7 +92,7 @@ def simulate(
     _quiet_mujoco_warnings()
     data = mujoco.MjData(model)
     lay = layout(model)
-    foot_bodies = {int(lay.body_ids[j]): i for i, j in enumerate(FOOT_JOINTS)}
+    foot_bodies = lay.body_ids[list(FOOT_JOINTS)]  # (4,) in the order of Rollout.contacts
     n = len(ref.qpos)
     qpos = np.zeros((n, model.nq))
     mpjpe = np.zeros(n)
@@ -103,12 +104,10 @@ def simulate(
     for k in range(n):
         qpos[k] = data.qpos
         mpjpe[k] = float(np.mean(np.linalg.norm(data.xpos[lay.body_ids] - ref.joints_mj[k], axis=-1)))
-        for c in data.contact[: data.ncon]:
-            for g1, g2 in ((c.geom1, c.geom2), (c.geom2, c.geom1)):
-                if g1 == 0:
-                    side = foot_bodies.get(int(model.geom_bodyid[g2]))
-                    if side is not None:
-                        contacts[k, side] = True
+        # Contacts with the floor (geom 0) by the foot bodies; the other geom of a floor pair is the body's.
+        pairs = data.contact.geom[: data.ncon]
+        on_floor = model.geom_bodyid[pairs[(pairs == 0).any(axis=1)].max(axis=1)]
+        contacts[k] = np.isin(foot_bodies, on_floor)
         if mpjpe[k] > fail_mpjpe and reset_on_fail:
             failed_at = k if failed_at is None else failed_at
             resets += 1
@@ -126,12 +125,13 @@ def simulate(
         data.ctrl[:] = ctrl
         data.qfrc_applied[:] = qfrc
         force = torque = 0.0
-        for s in range(cfg.substeps):
-            data.qfrc_applied[:6] = qfrc[:6] + controller.residual(data, ref, k + (s + 1) / cfg.substeps)
-            force += np.linalg.norm(data.qfrc_applied[:3]) / weight / cfg.substeps
-            torque += np.linalg.norm(data.qfrc_applied[3:6]) / weight / cfg.substeps
+        for s in range(1, cfg.substeps + 1):
+            wrench = qfrc[:6] + controller.residual(data, ref, k * cfg.substeps + s, cfg.substeps)
+            data.qfrc_applied[:6] = wrench
+            force += math.hypot(*wrench[:3])
+            torque += math.hypot(*wrench[3:])
             mujoco.mj_step(model, data)
-        res_f[k + 1], res_t[k + 1] = force, torque
+        res_f[k + 1], res_t[k + 1] = force / weight / cfg.substeps, torque / weight / cfg.substeps
     return Rollout(qpos, mpjpe, res_f, res_t, contacts, failed_at, resets)
 
 

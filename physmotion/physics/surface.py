@@ -15,25 +15,29 @@ from physmotion.physics.humanoid import HumanoidConfig, body_from_joints, build_
 from physmotion.physics.retarget import joints_to_qpos
 from physmotion.skeleton import FOOT_JOINTS, JOINT_NAMES
 
-_BOX_SIGNS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=np.float64)
-
-
 def geom_lowest(model, data, geom: int) -> float:
     """Height (m, MuJoCo z) of the lowest point of one box, capsule or sphere geom."""
-    import mujoco
-
-    size, pos, mat = model.geom_size[geom], data.geom_xpos[geom], data.geom_xmat[geom].reshape(3, 3)
-    kind = model.geom_type[geom]
-    if kind == mujoco.mjtGeom.mjGEOM_BOX:
-        return float(np.min(pos[2] + (_BOX_SIGNS * size) @ mat[2]))
-    if kind == mujoco.mjtGeom.mjGEOM_CAPSULE:
-        return float(pos[2] - abs(mat[2, 2]) * size[1] - size[0])
-    return float(pos[2] - size[0])  # sphere
+    return float(_lowest_of(model, data, np.array([geom]))[0])
 
 
 def lowest_point(model, data) -> float:
     """Height (m, MuJoCo z) of the lowest point of the body (every geom but the floor, geom 0)."""
-    return min(geom_lowest(model, data, g) for g in range(1, model.ngeom))
+    return float(_lowest_of(model, data, np.arange(1, model.ngeom)).min())
+
+
+def _lowest_of(model, data, geoms: np.ndarray) -> np.ndarray:
+    """Lowest heights (G,) of the given geoms, all at once: a box reaches down by the sum of its half
+    sizes times the |z| of its axes, a capsule by its half length along its axis plus the radius, a
+    sphere by its radius. (Vectorised: the projection asks this for every reference frame.)"""
+    import mujoco
+
+    size = model.geom_size[geoms]
+    zrow = data.geom_xmat[geoms][:, 6:9]  # third row of each rotation: the z of the geom's axes
+    kind = model.geom_type[geoms]
+    reach = np.where(kind == mujoco.mjtGeom.mjGEOM_BOX, np.abs(zrow * size).sum(-1),
+                     np.where(kind == mujoco.mjtGeom.mjGEOM_CAPSULE, np.abs(zrow[:, 2]) * size[:, 1] + size[:, 0],
+                              size[:, 0]))  # fmt: skip
+    return data.geom_xpos[geoms, 2] - reach
 
 
 class HumanoidSurface:
@@ -64,12 +68,12 @@ class HumanoidSurface:
             offsets = body_from_joints(motion) if self.offsets is None else self.offsets
             model = build_model(offsets, self.config)
             data = mujoco.MjData(model)
-            patch = [model.geom(JOINT_NAMES[j]).id for j in FOOT_JOINTS]
+            patch = np.array([model.geom(JOINT_NAMES[j]).id for j in FOOT_JOINTS])
             for t, q in enumerate(joints_to_qpos(motion, model, config=self.config)):
                 data.qpos[:] = q
                 mujoco.mj_kinematics(model, data)
                 lowest[b, t] = lowest_point(model, data)
-                feet[b, t] = [geom_lowest(model, data, g) for g in patch]
+                feet[b, t] = _lowest_of(model, data, patch)
         result = lowest.reshape(x.shape[:-2]), feet.reshape(x.shape[:-2] + (4,))
         self._cache = (*key, result)
         return result

@@ -20,11 +20,13 @@ the whole motion; the closed loop adds only the root PD. A learned policy implem
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
 from scipy.optimize import nnls
+from scipy.spatial.transform import Rotation, Slerp
 
 from physmotion.physics.humanoid import layout
 from physmotion.physics.retarget import qvel_from_qpos
@@ -63,6 +65,51 @@ class Reference:
     qvel: np.ndarray
     joints_mj: np.ndarray
     tau_ff: np.ndarray
+    _root: dict[int, RootTargets] = field(default_factory=dict, repr=False)
+
+    def root_targets(self, substeps: int) -> RootTargets:
+        """The root's reference at every simulation step of ``substeps`` per control step (cached)."""
+        if substeps not in self._root:
+            self._root[substeps] = _root_targets(self, substeps)
+        return self._root[substeps]
+
+
+@dataclass(frozen=True)
+class RootTargets:
+    """The reference root at simulation steps i = 0..(N-1) * substeps, i.e. control time i / substeps,
+    interpolated between control steps (positions and velocities linearly, the orientation by slerp).
+
+    pos, vel: (M, 3) world; quat: (M, 4) wxyz; omega: (M, 3) angular velocity, world frame;
+    ff_force: (M, 3) world and ff_torque: (M, 3) local, the feed-forward root wrench the feet could not
+    carry, held over each control step.
+    """
+
+    pos: np.ndarray
+    vel: np.ndarray
+    quat: np.ndarray
+    omega: np.ndarray
+    ff_force: np.ndarray
+    ff_torque: np.ndarray
+
+
+def _root_targets(ref: Reference, substeps: int) -> RootTargets:
+    n = len(ref.qpos)
+    t = np.arange((n - 1) * substeps + 1) / substeps
+    k = np.minimum(np.floor(t).astype(int), max(n - 2, 0))
+    a = (t - k)[:, None]
+    k1 = np.minimum(k + 1, n - 1)
+    rots = Rotation.from_quat(ref.qpos[:, 3:7], scalar_first=True)
+    quat = Slerp(np.arange(n), rots)(t) if n > 1 else rots
+    omega_local = (1 - a) * ref.qvel[k, 3:6] + a * ref.qvel[k1, 3:6]
+    ff = ref.tau_ff[np.minimum(k, len(ref.tau_ff) - 1), :6]
+    return RootTargets(
+        pos=(1 - a) * ref.qpos[k, :3] + a * ref.qpos[k1, :3],
+        vel=(1 - a) * ref.qvel[k, :3] + a * ref.qvel[k1, :3],
+        quat=quat.as_quat(scalar_first=True),
+        omega=quat.apply(omega_local),
+        ff_force=ff[:, :3],
+        ff_torque=ff[:, 3:],
+    )
 
 
 class Controller(Protocol):
@@ -72,8 +119,9 @@ class Controller(Protocol):
         """Controls held over the control step k -> k+1: (ctrl (nu,), qfrc_applied (nv,))."""
         ...
 
-    def residual(self, data, ref: Reference, t: float) -> np.ndarray:
-        """Root wrench (6,) for the simulation step that ends at control time t (k + fraction)."""
+    def residual(self, data, ref: Reference, step: int, substeps: int) -> np.ndarray:
+        """Root wrench (6,) for simulation step ``step`` (counted from the start, ``substeps`` per control
+        step): the one that ends at control time step / substeps."""
         ...
 
 
@@ -147,19 +195,6 @@ def prepare_reference(model, qpos: np.ndarray, dt: float, config: TrackingConfig
     return Reference(qpos=qpos, qvel=qvel, joints_mj=joints, tau_ff=tau)
 
 
-def _quat_error(q_ref: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """World-frame rotation vector taking orientation q to q_ref (wxyz quaternions)."""
-    import mujoco
-
-    qi = np.zeros(4)
-    mujoco.mju_negQuat(qi, q)
-    d = np.zeros(4)
-    mujoco.mju_mulQuat(d, q_ref, qi)
-    v = np.zeros(3)
-    mujoco.mju_quat2Vel(v, d, 1.0)
-    return v
-
-
 class ModelBasedTracker:
     """PD + inverse-dynamics feed-forward + bounded residual root wrench (see the module docstring).
 
@@ -193,52 +228,30 @@ class ModelBasedTracker:
         ctrl = ref.qpos[nxt, 7:] + (self.kv * ref.qvel[nxt, 6:] + ref.tau_ff[k, 6:]) / self.kp
         return ctrl, np.zeros(self.model.nv)
 
-    def residual(self, data, ref: Reference, t: float) -> np.ndarray:
-        """Root wrench (6,) for the simulation step ending at control time t (MuJoCo free-joint
-        convention: world force, local torque), clipped to the configured bounds."""
+    def residual(self, data, ref: Reference, step: int, substeps: int) -> np.ndarray:
+        """Root wrench (6,) for simulation step ``step`` (ending at control time step / substeps), in
+        MuJoCo's free-joint convention (world force, local torque), clipped to the configured bounds.
+
+        This runs at every simulation step, in Python, so the reference side is precomputed
+        (:meth:`Reference.root_targets`) and the torque is worked out in the pelvis frame, where the
+        free joint wants it (a norm bound does not depend on the frame).
+        """
+        import mujoco
+
         cfg = self.config
-        k = min(int(np.floor(t)), len(ref.qpos) - 2)
-        a = t - k
-        pos_ref = (1 - a) * ref.qpos[k, :3] + a * ref.qpos[k + 1, :3]
-        vel_ref = (1 - a) * ref.qvel[k, :3] + a * ref.qvel[k + 1, :3]
-        quat_ref = _slerp(ref.qpos[k, 3:7], ref.qpos[k + 1, 3:7], a)
-        omega_ref = _rotate_local_to_world(quat_ref, (1 - a) * ref.qvel[k, 3:6] + a * ref.qvel[k + 1, 3:6])
+        tgt = ref.root_targets(substeps)
+        i = min(step, len(tgt.pos) - 1)
         rot = data.xmat[1].reshape(3, 3)  # pelvis orientation (body 1 is the root)
-        ff = ref.tau_ff[min(k, len(ref.tau_ff) - 1), :6]
-        force = ff[:3] + cfg.root_kp * (pos_ref - data.qpos[:3]) + cfg.root_kd * (vel_ref - data.qvel[:3])
-        omega = rot @ data.qvel[3:6]
-        torque = (rot @ ff[3:6] + cfg.root_rot_kp * _quat_error(quat_ref, data.qpos[3:7])
-                  + cfg.root_rot_kd * (omega_ref - omega))  # fmt: skip
+        force = (tgt.ff_force[i] + cfg.root_kp * (tgt.pos[i] - data.qpos[:3])
+                 + cfg.root_kd * (tgt.vel[i] - data.qvel[:3]))  # fmt: skip
+        err = np.zeros(3)
+        mujoco.mju_subQuat(err, tgt.quat[i], data.qpos[3:7])  # pelvis -> target, as a local rotation vector
+        torque = tgt.ff_torque[i] + cfg.root_rot_kp * err + cfg.root_rot_kd * (tgt.omega[i] @ rot - data.qvel[3:6])
         force = _clip_norm(force, self.max_force)
         force[2] = min(force[2], self.max_lift)  # MuJoCo z is up
-        return np.concatenate([force, rot.T @ _clip_norm(torque, self.max_torque)])
-
-
-def _slerp(q0: np.ndarray, q1: np.ndarray, a: float) -> np.ndarray:
-    """Quaternion (wxyz) a of the way from q0 to q1 (MuJoCo's quaternion helpers)."""
-    import mujoco
-
-    dq = np.zeros(4)
-    inv = np.zeros(4)
-    mujoco.mju_negQuat(inv, q0)
-    mujoco.mju_mulQuat(dq, q1, inv)  # world-frame rotation from q0 to q1
-    vel = np.zeros(3)
-    mujoco.mju_quat2Vel(vel, dq, 1.0)
-    step = np.zeros(4)
-    mujoco.mju_axisAngle2Quat(step, vel / (np.linalg.norm(vel) or 1.0), a * np.linalg.norm(vel))
-    out = np.zeros(4)
-    mujoco.mju_mulQuat(out, step, q0)
-    return out
-
-
-def _rotate_local_to_world(quat: np.ndarray, v: np.ndarray) -> np.ndarray:
-    import mujoco
-
-    out = np.zeros(3)
-    mujoco.mju_rotVecQuat(out, v, quat)
-    return out
+        return np.concatenate([force, _clip_norm(torque, self.max_torque)])
 
 
 def _clip_norm(v: np.ndarray, bound: float) -> np.ndarray:
-    n = float(np.linalg.norm(v))
+    n = math.sqrt(float(v @ v))
     return v if n <= bound or n == 0.0 else v * (bound / n)

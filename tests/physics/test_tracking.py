@@ -87,11 +87,11 @@ def test_commanded_residual_respects_its_bound(real_walk: np.ndarray, bound: flo
     data = mujoco.MjData(model)
     data.qpos[:] = ref.qpos[0] - np.r_[0, 0, 0.2, np.zeros(model.nq - 3)]
     mujoco.mj_forward(model, data)
-    wrench = tracker.residual(data, ref, 0.5)
+    wrench = tracker.residual(data, ref, 1, 2)
     assert np.linalg.norm(wrench[:3]) == pytest.approx(bound * tracker.weight, rel=1e-6)
     assert np.linalg.norm(wrench[3:6]) <= bound * tracker.weight + 1e-9
     capped = ModelBasedTracker(model, TrackingConfig(residual_force=bound, residual_lift=0.01))
-    assert capped.residual(data, ref, 0.5)[2] == pytest.approx(0.01 * capped.weight)  # upward cap
+    assert capped.residual(data, ref, 1, 2)[2] == pytest.approx(0.01 * capped.weight)  # upward cap
 
 
 def test_humanoid_surface_reads_the_geoms(real_walk: np.ndarray) -> None:
