@@ -3,7 +3,8 @@
 One closed-loop episode is a Python loop over control steps (30 Hz) of ``substeps`` ``mj_step`` calls
 (360 Hz in the projection). Batches run episodes on a thread pool, one ``MjData`` per episode:
 ``mj_step`` releases the GIL, and ``mujoco.rollout`` cannot be used because the controller is
-closed-loop (the root PD reads the state), see shared/notes/tracking-controller.md §4. ``bench/physics.py`` compares the two.
+closed-loop (the root PD reads the state), see shared/notes/tracking-controller.md §4.
+``bench/physics.py`` compares the two.
 """
 
 from __future__ import annotations
