@@ -35,8 +35,8 @@ def _lowest_of(model, data, geoms: np.ndarray) -> np.ndarray:
     zrow = data.geom_xmat[geoms][:, 6:9]  # third row of each rotation: the z of the geom's axes
     kind = model.geom_type[geoms]
     reach = np.where(kind == mujoco.mjtGeom.mjGEOM_BOX, np.abs(zrow * size).sum(-1),
-                     np.where(kind == mujoco.mjtGeom.mjGEOM_CAPSULE, np.abs(zrow[:, 2]) * size[:, 1] + size[:, 0],
-                              size[:, 0]))  # fmt: skip
+                     np.where(kind == mujoco.mjtGeom.mjGEOM_CAPSULE,
+                              np.abs(zrow[:, 2]) * size[:, 1] + size[:, 0], size[:, 0]))  # fmt: skip
     return data.geom_xpos[geoms, 2] - reach
 
 

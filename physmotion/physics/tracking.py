@@ -246,7 +246,8 @@ class ModelBasedTracker:
                  + cfg.root_kd * (tgt.vel[i] - data.qvel[:3]))  # fmt: skip
         err = np.zeros(3)
         mujoco.mju_subQuat(err, tgt.quat[i], data.qpos[3:7])  # pelvis -> target, as a local rotation vector
-        torque = tgt.ff_torque[i] + cfg.root_rot_kp * err + cfg.root_rot_kd * (tgt.omega[i] @ rot - data.qvel[3:6])
+        omega_err = tgt.omega[i] @ rot - data.qvel[3:6]  # local frame: R^T omega_ref - omega
+        torque = tgt.ff_torque[i] + cfg.root_rot_kp * err + cfg.root_rot_kd * omega_err
         force = _clip_norm(force, self.max_force)
         force[2] = min(force[2], self.max_lift)  # MuJoCo z is up
         return np.concatenate([force, _clip_norm(torque, self.max_torque)])
