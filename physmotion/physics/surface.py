@@ -15,11 +15,6 @@ from physmotion.physics.humanoid import HumanoidConfig, body_from_joints, build_
 from physmotion.physics.retarget import joints_to_qpos
 from physmotion.skeleton import FOOT_JOINTS, JOINT_NAMES
 
-def geom_lowest(model, data, geom: int) -> float:
-    """Height (m, MuJoCo z) of the lowest point of one box, capsule or sphere geom."""
-    return float(_lowest_of(model, data, np.array([geom]))[0])
-
-
 def lowest_point(model, data) -> float:
     """Height (m, MuJoCo z) of the lowest point of the body (every geom but the floor, geom 0)."""
     return float(_lowest_of(model, data, np.arange(1, model.ngeom)).min())
