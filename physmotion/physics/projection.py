@@ -1,8 +1,9 @@
 """The physics projection P of PhysDiff: imitate a motion with the simulated humanoid, return the result.
 
 ``project(motion)`` builds a humanoid with the motion's own body (bone lengths, feet fitted to its
-standing pose), retargets the joints to qpos, resamples them to the control rate, runs the tracking
-controller and resamples the simulated motion back to the input's frame rate. Morph's imitation
+standing pose), retargets the joints to qpos, resamples them to the control rate, shapes that
+reference (out of the floor, swing feet a little higher: :mod:`physmotion.physics.shaping`), runs the
+tracking controller and resamples the simulated motion back to the input's frame rate. Morph's imitation
 selection then keeps the simulated motion where its MPJPE stayed below ``tau`` and the input
 otherwise, flagged.
 
@@ -30,8 +31,8 @@ from physmotion.physics.humanoid import (
     foot_lift,
 )
 from physmotion.physics.retarget import joints_to_qpos, qpos_to_joints
+from physmotion.physics.shaping import ShapingConfig, shape_reference
 from physmotion.physics.sim import Rollout, simulate_batch
-from physmotion.physics.surface import lowest_point
 from physmotion.physics.tracking import ModelBasedTracker, TrackingConfig, prepare_reference
 from physmotion.skeleton import NUM_JOINTS
 
@@ -39,9 +40,9 @@ from physmotion.skeleton import NUM_JOINTS
 def _default_humanoid() -> HumanoidConfig:
     """The projection's humanoid: 360 Hz, ankles kp 5000, contacts 2.5 times as stiff as MuJoCo's default.
 
-    Measured over all 203 walking/running clips of the bundled mocap (bench/projection_quality.py, with
-    ``ground_reference``): at 240 Hz with ankle kp 2000, 85 % tracked at 67 mm; 360 Hz alone made it
-    96 %, and stiffer ankles then cut the error (kp 3000 / 4000 / 5000: 99.5 / 98 / 98.5 % at
+    Measured over all 203 walking/running clips of the bundled mocap (bench/projection_quality.py, with a
+    grounded reference, before swing clearance): at 240 Hz with ankle kp 2000, 85 % tracked at 67 mm;
+    360 Hz alone made it 96 %, and stiffer ankles then cut the error (kp 3000 / 4000 / 5000: 99.5 / 98 / 98.5 % at
     61 / 54 / 54 mm); 480 Hz was no better (93 %). The stiff ankle needs the small step: at 240 Hz kp
     4000 tracked 74 %. A shorter contact time constant cuts the loaded soles' sinking (Penetrate ~2 mm
     at MuJoCo's 20 ms): 10 / 8 ms gave 1.03 / 0.87 mm at 99 / 97.5 % and 56 / 58 mm (12 ms with ankle
@@ -76,11 +77,9 @@ class ProjectionConfig:
     # humanoid back on the reference where it fails and go on, so the output is always simulated; PhysDiff
     # sampling uses this, because a kept kinematic input would carry its artefacts to the next step.
     reset_on_fail: bool = False
-    # Raise every reference frame whose geometry dips into the floor until it touches it. The stiff legs
-    # otherwise press the feet toward targets under the floor and launch the body (measured on Bandai
-    # walks: the reference soles are 12 mm under the floor on average, the humanoid was airborne in 65 %
-    # of the control steps of a walk and fell).
-    ground_reference: bool = True
+    # What the tracker is asked to follow: the reference out of the floor, swing feet a little higher
+    # (physics/shaping.py has the measurements).
+    shaping: ShapingConfig = field(default_factory=ShapingConfig)
 
 
 @dataclass
@@ -172,8 +171,7 @@ def project(
         model = build_model(body, cfg.humanoid)
         lift = foot_lift(body, cfg.humanoid)
         qpos = resample_qpos(joints_to_qpos(x, model, lift=lift, config=cfg.humanoid), fps, ctrl_fps)
-        if cfg.ground_reference:
-            qpos = _out_of_floor(model, qpos)
+        qpos = shape_reference(model, qpos, cfg.humanoid.control_dt, cfg.shaping)
         ref = prepare_reference(model, qpos, cfg.humanoid.control_dt, cfg.tracking)
         jobs.append((model, ref, ModelBasedTracker(model, cfg.tracking)))
         setups.append((model, lift))
@@ -186,19 +184,6 @@ def project(
     if not batched:
         result = ProjectedMotion(**{k: v[0] for k, v in stacked.items()})
     return result
-
-
-def _out_of_floor(model, qpos: np.ndarray) -> np.ndarray:
-    """qpos (N, 70) with each frame raised (never lowered) so that no geom is under the floor."""
-    import mujoco
-
-    data = mujoco.MjData(model)
-    out = qpos.copy()
-    for k, q in enumerate(qpos):
-        data.qpos[:] = q
-        mujoco.mj_kinematics(model, data)
-        out[k, 2] -= min(lowest_point(model, data), 0.0)
-    return out
 
 
 def _back_to_input_rate(

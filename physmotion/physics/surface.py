@@ -44,16 +44,17 @@ class HumanoidSurface:
 
     def __init__(self, offsets: np.ndarray | None = None, config: HumanoidConfig | None = None) -> None:
         self.offsets, self.config = offsets, config or HumanoidConfig()
-        self._cache: tuple[int, tuple[int, ...], tuple[np.ndarray, np.ndarray]] | None = None
+        self._cache: tuple[object, tuple[np.ndarray, np.ndarray]] | None = None
 
     def _per_frame(self, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(lowest (..., T), feet (..., T, 4)) heights in metres; the metrics ask for both of the same
         array in turn, so the last result is kept."""
         import mujoco
 
-        key = (id(joints), np.shape(joints))
-        if self._cache is not None and self._cache[:2] == key:
-            return self._cache[2]
+        # Keyed on the array object itself, held here: an id() alone can be reused by the next array
+        # once the first is freed, and would then return another motion's heights.
+        if self._cache is not None and self._cache[0] is joints:
+            return self._cache[1]
 
         x = np.asarray(joints, dtype=np.float64)
         flat = x.reshape((-1,) + x.shape[-3:])
@@ -70,7 +71,7 @@ class HumanoidSurface:
                 lowest[b, t] = lowest_point(model, data)
                 feet[b, t] = _lowest_of(model, data, patch)
         result = lowest.reshape(x.shape[:-2]), feet.reshape(x.shape[:-2] + (4,))
-        self._cache = (*key, result)
+        self._cache = (joints, result)
         return result
 
     def lowest_height(self, joints: np.ndarray) -> np.ndarray:

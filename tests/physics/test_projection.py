@@ -24,14 +24,14 @@ def test_tracks_a_real_walk(walk: np.ndarray) -> None:
     out = project(walk)
     assert out.success and out.selected
     assert out.joints.shape == out.simulated.shape == walk.shape and out.mpjpe.shape == (80,)
-    # metres: 87 mm on these 4 s; 58 mm on average over all 203 walk/run clips (bench/projection_quality.py)
-    assert out.mpjpe.mean() < 0.10
-    # A MuJoCo contact at the sampled instant in half the frames (measured 0.50): with stiff contacts the
-    # loaded foot bounces off by a few mm between impacts (Float 3.9 mm over all walk/run clips).
-    assert out.contacts.any(axis=1).mean() >= 0.4
+    # metres: 36 mm on these 4 s; 47 mm on average over all 203 walk/run clips (bench/projection_quality.py)
+    assert out.mpjpe.mean() < 0.05
+    # A MuJoCo contact at the sampled instant in 70 % of the frames: with stiff contacts the loaded foot
+    # bounces off by a few mm between impacts.
+    assert out.contacts.any(axis=1).mean() >= 0.6
     after = physical_metrics(out.simulated, body=HumanoidSurface(body_from_joints(walk)))
     # MuJoCo's soft contacts let the loaded soles sink a little; the issue asks for <= 1 mm.
-    assert after["penetrate"] < 1.5  # mm: 1.2 here, 0.87 on average over all 203 walk/run clips
+    assert after["penetrate"] < 1.0  # mm: 0.54 here, 0.74 on average over all 203 walk/run clips
 
 
 def test_deterministic_and_batch_equals_one_by_one(walk: np.ndarray) -> None:
@@ -52,7 +52,9 @@ def test_a_floating_walk_comes_down(walk: np.ndarray) -> None:
     before = physical_metrics(lifted.astype(np.float32), body=surface)["float"]
     after = physical_metrics(out.simulated, body=surface)["float"]
     print(f"\nfloat {before:.1f} -> {after:.1f} mm")
-    assert after < 0.12 * before  # measured 75.5 -> 7.8 mm, -89.6 %: just short of the issue's -90 %
+    # The issue asks for -90 %. Measured 75.5 -> 0.1 mm: the reference, floating for more than a second,
+    # is lowered onto the floor (physics/shaping.py); tracked 10 cm up, the body hopped (7.8 mm).
+    assert after < 0.1 * before
 
 
 def test_a_sunk_walk_comes_up(walk: np.ndarray) -> None:
@@ -80,8 +82,8 @@ def test_a_dragged_root_skates_less(mocap_dir) -> None:
     before = physical_metrics(dragged.astype(np.float32), body=surface)["skate"]
     after = physical_metrics(out.joints, body=surface)["skate"]
     print(f"\nskate {before:.1f} -> {after:.1f} mm")
-    # Measured 6.4 -> 3.8 mm. The simulated feet creep by themselves (the undragged bow: 0.7 -> 2.7 mm),
-    # so a drag of 0.2 m does not come out lower (2.8 -> 3.4 mm).
+    # Measured 6.5 -> 4.2 mm. The simulated feet creep by themselves (the undragged bow: 0.7 -> 2.6 mm),
+    # so a drag of 0.2 m does not come out lower (2.8 -> 3.5 mm).
     assert after < 0.75 * before
 
 

@@ -1,0 +1,105 @@
+"""Reference shaping on a real walk: grounding and swing-foot clearance."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from physmotion.physics.humanoid import HumanoidConfig, body_from_joints, build_model, foot_lift, layout
+from physmotion.physics.projection import resample_qpos
+from physmotion.physics.retarget import joints_to_qpos
+from physmotion.physics.shaping import ShapingConfig, shape_reference, swing_clearance, to_floor
+from physmotion.physics.surface import _lowest_of, lowest_point
+from physmotion.skeleton import JOINT_INDEX
+
+DT = HumanoidConfig().control_dt
+
+
+@pytest.fixture(scope="module")
+def walk_qpos(real_walk: np.ndarray):
+    """(model, qpos (N, 70) at the control rate) of 4 s of the real walk, soles at the floor."""
+    x = real_walk[:80]
+    body = body_from_joints(x)
+    model = build_model(body)
+    qpos = resample_qpos(joints_to_qpos(x, model, lift=foot_lift(body)), 20.0, 1.0 / DT)
+    return model, qpos
+
+
+def _lowest(model, qpos: np.ndarray) -> np.ndarray:
+    import mujoco
+
+    data = mujoco.MjData(model)
+    out = []
+    for q in qpos:
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        out.append(lowest_point(model, data))
+    return np.array(out)
+
+
+def test_to_floor_raises_sunk_frames_and_lowers_a_floating_motion(walk_qpos) -> None:
+    model, qpos = walk_qpos
+    grounded = to_floor(model, qpos, DT, float_window=1.0)
+    assert _lowest(model, grounded).min() > -1e-9  # nothing under the floor
+    assert np.all(grounded[:, 2] >= qpos[:, 2] - 0.005)  # a walk touches the floor: hardly lowered
+
+    lifted = qpos.copy()
+    lifted[:, 2] += 0.1
+    down = to_floor(model, lifted, DT, float_window=1.0)
+    low = _lowest(model, down)
+    assert low.min() > -1e-9 and np.median(low) < 0.01  # back on the floor, not 10 cm above it
+    # Off: only raised, never lowered.
+    np.testing.assert_allclose(to_floor(model, lifted, DT, float_window=0.0), lifted)
+
+
+def test_to_floor_keeps_a_jump(walk_qpos) -> None:
+    """Half a second of flight 10 cm up in the middle of a stand: a jump, not floating."""
+    model, qpos = walk_qpos
+    stand = np.repeat(to_floor(model, qpos[:1], DT, 0.0), 60, axis=0)
+    t = np.arange(60) * DT
+    flight = (t > 0.8) & (t < 1.3)
+    stand[flight, 2] += 0.1 * np.sin(np.pi * (t[flight] - 0.8) / 0.5)
+    out = to_floor(model, stand, DT, float_window=1.0)
+    np.testing.assert_allclose(out[:, 2], stand[:, 2], atol=1e-9)
+
+
+def test_swing_clearance_lifts_swing_feet_only(walk_qpos) -> None:
+    import mujoco
+
+    model, qpos = walk_qpos
+    qpos = to_floor(model, qpos, DT, 1.0)
+    cfg = ShapingConfig()
+    out = swing_clearance(model, qpos, DT, cfg)
+    lay = layout(model)
+    data = mujoco.MjData(model)
+    feet = {}
+    for side in ("left", "right"):
+        ankle, foot = (int(lay.body_ids[JOINT_INDEX[f"{side}_{j}"]]) for j in ("ankle", "foot"))
+        feet[side] = (ankle, np.flatnonzero(np.isin(model.geom_bodyid, [ankle, foot])))
+
+    def pose(q):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        return {s: (data.xpos[a].copy(), data.xquat[a].copy(), _lowest_of(model, data, g).min())
+                for s, (a, g) in feet.items()}  # fmt: skip
+
+    lifted, errs = 0, []
+    poses = [pose(q) for q in qpos]
+    speed = {s: np.linalg.norm(np.gradient(np.array([p[s][0][:2] for p in poses]), DT, axis=0), axis=-1)
+             for s in feet}  # fmt: skip
+    for k, (before, after_q) in enumerate(zip(poses, out)):
+        after = pose(after_q)
+        for side, other in (("left", "right"), ("right", "left")):
+            (p0, q0, h0), (p1, q1, _) = before[side], after[side]
+            moving = np.clip(speed[side][k] / cfg.clearance_speed - 1.0, 0.0, 1.0)
+            expected = min(max(h0, 0.0), cfg.clearance_max) * moving if before[other][2] <= cfg.support else 0.0
+            errs.append(abs(p1[2] - p0[2] - expected))
+            assert p1[2] - p0[2] == pytest.approx(expected, abs=5e-4)
+            assert np.linalg.norm(p1[:2] - p0[:2]) < 5e-4  # the foothold's place is kept
+            assert abs(abs(q0 @ q1) - 1.0) < 1e-5  # and the foot's orientation
+            lifted += expected > 0.005
+    print(f"\nlift error max {1000 * max(errs):.3f} mm, {lifted} lifted")
+    assert lifted > 20  # the walk has swing phases, and they were lifted
+    np.testing.assert_array_equal(out[:, :7], qpos[:, :7])  # the root is not touched
+    unlifted = shape_reference(model, qpos, DT, ShapingConfig(clearance_gain=0.0))
+    np.testing.assert_array_equal(unlifted, to_floor(model, qpos, DT, 1.0))
