@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from physmotion.physics.humanoid import layout
-from physmotion.physics.surface import _lowest_of, lowest_point
+from physmotion.physics.surface import geoms_lowest, lowest_point
 from physmotion.skeleton import JOINT_INDEX
 
 _IK_STEPS = 3  # Gauss-Newton steps of swing_clearance's leg IK
@@ -63,8 +63,8 @@ def to_floor(model, qpos: np.ndarray, dt: float, float_window: float) -> np.ndar
     is taken to float, not to jump: a jump's flight lasts well under a second. It is lowered by the
     least height it keeps over that window (a running minimum, smoothed over 0.1 s), so that it stands
     on the floor. Measured: a walk lifted 10 cm was tracked while the root PD kept pulling the body up
-    toward it, and it hopped (Float 75.5 -> 7.8 mm); lowered first, 2.7 mm. The jumps of the bundled
-    mocap and all walking/running clips project as before. 0 turns the lowering off.
+    toward it, and it hopped (Float 75.5 -> 7.8 mm); lowered first, 0.1 mm (test_projection.py). The
+    jumps of the bundled mocap and all walking/running clips project as before. 0: never lowered.
     """
     import mujoco
     from scipy.ndimage import gaussian_filter1d, minimum_filter1d
@@ -107,9 +107,10 @@ def swing_clearance(model, qpos: np.ndarray, dt: float, config: ShapingConfig) -
     for k in range(len(out)):
         data.qpos[:] = out[k]
         mujoco.mj_kinematics(model, data)
-        heights[k] = [float(_lowest_of(model, data, leg.geoms).min()) for leg in legs]
+        heights[k] = [float(geoms_lowest(model, data, leg.geoms).min()) for leg in legs]
         where[k] = [data.xpos[leg.ankle, :2] for leg in legs]
-    speed = np.linalg.norm(np.gradient(where, dt, axis=0), axis=-1) if len(out) > 1 else np.zeros((len(out), 2))
+    moved = np.gradient(where, dt, axis=0) if len(out) > 1 else np.zeros_like(where)
+    speed = np.linalg.norm(moved, axis=-1)
     moving = np.clip(speed / config.clearance_speed - 1.0, 0.0, 1.0)
     lifts = np.minimum(config.clearance_gain * np.maximum(heights, 0.0), config.clearance_max) * moving
     lifts[heights[:, ::-1] > config.support] = 0.0  # the other foot is off the floor too

@@ -17,10 +17,10 @@ from physmotion.skeleton import FOOT_JOINTS, JOINT_NAMES
 
 def lowest_point(model, data) -> float:
     """Height (m, MuJoCo z) of the lowest point of the body (every geom but the floor, geom 0)."""
-    return float(_lowest_of(model, data, np.arange(1, model.ngeom)).min())
+    return float(geoms_lowest(model, data, np.arange(1, model.ngeom)).min())
 
 
-def _lowest_of(model, data, geoms: np.ndarray) -> np.ndarray:
+def geoms_lowest(model, data, geoms: np.ndarray) -> np.ndarray:
     """Lowest heights (G,) of the given geoms, all at once: a box reaches down by the sum of its half
     sizes times the |z| of its axes, a capsule by its half length along its axis plus the radius, a
     sphere by its radius. (Vectorised: the projection asks this for every reference frame.)"""
@@ -69,7 +69,7 @@ class HumanoidSurface:
                 data.qpos[:] = q
                 mujoco.mj_kinematics(model, data)
                 lowest[b, t] = lowest_point(model, data)
-                feet[b, t] = _lowest_of(model, data, patch)
+                feet[b, t] = geoms_lowest(model, data, patch)
         result = lowest.reshape(x.shape[:-2]), feet.reshape(x.shape[:-2] + (4,))
         self._cache = (joints, result)
         return result

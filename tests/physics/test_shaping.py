@@ -9,7 +9,7 @@ from physmotion.physics.humanoid import HumanoidConfig, body_from_joints, build_
 from physmotion.physics.projection import resample_qpos
 from physmotion.physics.retarget import joints_to_qpos
 from physmotion.physics.shaping import ShapingConfig, shape_reference, swing_clearance, to_floor
-from physmotion.physics.surface import _lowest_of, lowest_point
+from physmotion.physics.surface import geoms_lowest, lowest_point
 from physmotion.skeleton import JOINT_INDEX
 
 DT = HumanoidConfig().control_dt
@@ -80,7 +80,7 @@ def test_swing_clearance_lifts_swing_feet_only(walk_qpos) -> None:
     def pose(q):
         data.qpos[:] = q
         mujoco.mj_kinematics(model, data)
-        return {s: (data.xpos[a].copy(), data.xquat[a].copy(), _lowest_of(model, data, g).min())
+        return {s: (data.xpos[a].copy(), data.xquat[a].copy(), geoms_lowest(model, data, g).min())
                 for s, (a, g) in feet.items()}  # fmt: skip
 
     lifted, errs = 0, []
@@ -92,7 +92,8 @@ def test_swing_clearance_lifts_swing_feet_only(walk_qpos) -> None:
         for side, other in (("left", "right"), ("right", "left")):
             (p0, q0, h0), (p1, q1, _) = before[side], after[side]
             moving = np.clip(speed[side][k] / cfg.clearance_speed - 1.0, 0.0, 1.0)
-            expected = min(max(h0, 0.0), cfg.clearance_max) * moving if before[other][2] <= cfg.support else 0.0
+            supported = before[other][2] <= cfg.support
+            expected = min(max(h0, 0.0), cfg.clearance_max) * moving if supported else 0.0
             errs.append(abs(p1[2] - p0[2] - expected))
             assert p1[2] - p0[2] == pytest.approx(expected, abs=5e-4)
             assert np.linalg.norm(p1[:2] - p0[:2]) < 5e-4  # the foothold's place is kept
