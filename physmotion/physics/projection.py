@@ -78,6 +78,9 @@ class ProjectionConfig:
     # humanoid back on the reference where it fails and go on, so the output is always simulated; PhysDiff
     # sampling uses this, because a kept kinematic input would carry its artefacts to the next step.
     reset_on_fail: bool = False
+    # With reset_on_fail: where the body has only drifted from the reference (its pose, horizontal offset
+    # taken out, is within tau), move the rest of the reference to it instead of resetting it.
+    follow_drift: bool = True
     # What the tracker is asked to follow: the reference out of the floor, swing feet a little higher
     # (physics/shaping.py has the measurements).
     shaping: ShapingConfig = field(default_factory=ShapingConfig)
@@ -177,7 +180,7 @@ def project(
         jobs.append((model, ref, ModelBasedTracker(model, cfg.tracking)))
         setups.append((model, lift))
     rolls = simulate_batch(jobs, cfg.humanoid, fail_mpjpe=cfg.tau, threads=cfg.threads,
-                           reset_on_fail=cfg.reset_on_fail)
+                           reset_on_fail=cfg.reset_on_fail, follow_drift=cfg.follow_drift)
     outs = [_back_to_input_rate(roll, model, lift, x, fps, ctrl_fps, cfg.tau, cfg.reset_on_fail)
             for roll, (model, lift), x in zip(rolls, setups, joints)]  # fmt: skip
     stacked = {k: np.stack([o[k] for o in outs]) for k in outs[0]}

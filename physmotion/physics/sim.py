@@ -29,8 +29,11 @@ class Rollout:
     qpos: (N, 70); mpjpe: (N,) metres, mean distance of the 22 bodies to the reference;
     residual_force, residual_torque: (N,) root residual used, fractions of W and W x 1 m (0 at step 0);
     contacts: (N, 4) bool, left ankle, left foot, right ankle, right foot touching the floor;
-    failed_at: first control step whose MPJPE exceeded the failure threshold, or None.
+    failed_at: first control step whose MPJPE exceeded the failure threshold, or None (with
+    ``reset_on_fail`` and ``follow_drift``: the first step that needed a reset).
     resets: how many times the humanoid was put back on the reference (``reset_on_fail``).
+    shifts: how many times the rest of the reference was moved to where the body had drifted
+    (``follow_drift``).
     """
 
     qpos: np.ndarray
@@ -40,6 +43,7 @@ class Rollout:
     contacts: np.ndarray
     failed_at: int | None
     resets: int = 0
+    shifts: int = 0
 
 
 def _quiet_mujoco_warnings() -> None:
@@ -79,13 +83,17 @@ def simulate(
     config: HumanoidConfig | None = None,
     fail_mpjpe: float = 0.5,
     reset_on_fail: bool = False,
+    follow_drift: bool = False,
 ) -> Rollout:
     """Run ``controller`` along ``ref`` (at the control rate of ``config``) from the reference's start.
 
     The episode ends early when the MPJPE to the reference exceeds ``fail_mpjpe`` (Morph's 0.5 m);
     the remaining steps then repeat the last state and ``failed_at`` is set. With ``reset_on_fail`` the
     humanoid is instead put back on the reference at that step and the episode goes on (the usual
-    practice when evaluating imitation policies, e.g. PHC); ``resets`` counts how often.
+    practice when evaluating imitation policies, e.g. PHC); ``resets`` counts how often. With
+    ``follow_drift`` as well, a body whose pose is still within ``fail_mpjpe`` once its horizontal
+    offset from the reference is taken out has only drifted (on generated motions whose feet slide, it
+    lags behind): the rest of the reference is moved to it instead, and nothing jumps.
     """
     import mujoco
 
@@ -101,10 +109,17 @@ def simulate(
     contacts = np.zeros((n, 4), dtype=bool)
     weight = float(model.body_subtreemass[0]) * STANDARD_GRAVITY
     reset_state(model, data, ref)
-    failed_at, resets = None, 0
+    failed_at, resets, shifts = None, 0, 0
     for k in range(n):
         qpos[k] = data.qpos
         mpjpe[k] = float(np.mean(np.linalg.norm(data.xpos[lay.body_ids] - ref.joints_mj[k], axis=-1)))
+        if mpjpe[k] > fail_mpjpe and reset_on_fail and follow_drift:
+            offset = data.qpos[:2] - ref.qpos[k, :2]  # MuJoCo x/y: horizontal
+            drifted = ref.shifted(k, offset, cfg.substeps)
+            pose_error = float(np.mean(np.linalg.norm(data.xpos[lay.body_ids] - drifted.joints_mj[k], axis=-1)))
+            if pose_error <= fail_mpjpe:
+                ref, mpjpe[k] = drifted, pose_error
+                shifts += 1
         # Contacts with the floor (geom 0) by the foot bodies; the other geom of a floor pair is the body's.
         pairs = data.contact.geom[: data.ncon]
         on_floor = model.geom_bodyid[pairs[(pairs == 0).any(axis=1)].max(axis=1)]
@@ -133,7 +148,7 @@ def simulate(
             torque += math.hypot(*wrench[3:])
             mujoco.mj_step(model, data)
         res_f[k + 1], res_t[k + 1] = force / weight / cfg.substeps, torque / weight / cfg.substeps
-    return Rollout(qpos, mpjpe, res_f, res_t, contacts, failed_at, resets)
+    return Rollout(qpos, mpjpe, res_f, res_t, contacts, failed_at, resets, shifts)
 
 
 def simulate_batch(
@@ -142,6 +157,7 @@ def simulate_batch(
     fail_mpjpe: float = 0.5,
     threads: int = 0,
     reset_on_fail: bool = False,
+    follow_drift: bool = False,
 ) -> list[Rollout]:
     """:func:`simulate` for many (model, reference, controller) triples on a thread pool.
 
@@ -150,7 +166,7 @@ def simulate_batch(
     """
     threads = threads or os.cpu_count() or 1
     if threads == 1 or len(jobs) == 1:
-        return [simulate(m, r, c, config, fail_mpjpe, reset_on_fail) for m, r, c in jobs]
+        return [simulate(m, r, c, config, fail_mpjpe, reset_on_fail, follow_drift) for m, r, c in jobs]
     with ThreadPoolExecutor(max_workers=threads) as pool:
-        return list(pool.map(lambda job: simulate(*job, config, fail_mpjpe, reset_on_fail), jobs))
+        return list(pool.map(lambda job: simulate(*job, config, fail_mpjpe, reset_on_fail, follow_drift), jobs))
 

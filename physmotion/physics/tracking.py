@@ -73,6 +73,18 @@ class Reference:
             self._root[substeps] = _root_targets(self, substeps)
         return self._root[substeps]
 
+    def shifted(self, step: int, offset: np.ndarray, substeps: int) -> Reference:
+        """A copy whose control steps from ``step`` on are moved horizontally by ``offset`` (2,), MuJoCo
+        x/y; the root targets of ``substeps`` per control step move with them."""
+        qpos, joints = self.qpos.copy(), self.joints_mj.copy()
+        qpos[step:, :2] += offset
+        joints[step:, :, :2] += offset
+        tgt = self.root_targets(substeps)
+        pos = tgt.pos.copy()
+        pos[step * substeps :, :2] += offset
+        root = {substeps: RootTargets(pos, tgt.vel, tgt.quat, tgt.omega, tgt.ff_force, tgt.ff_torque)}
+        return Reference(qpos=qpos, qvel=self.qvel, joints_mj=joints, tau_ff=self.tau_ff, _root=root)
+
 
 @dataclass(frozen=True)
 class RootTargets:

@@ -24,14 +24,48 @@ def test_tracks_a_real_walk(walk: np.ndarray) -> None:
     out = project(walk)
     assert out.success and out.selected
     assert out.joints.shape == out.simulated.shape == walk.shape and out.mpjpe.shape == (80,)
-    # metres: 36 mm on these 4 s; 47 mm on average over all 203 walk/run clips (bench/projection_quality.py)
-    assert out.mpjpe.mean() < 0.05
-    # A MuJoCo contact at the sampled instant in 70 % of the frames: with stiff contacts the loaded foot
+    # metres: 22 mm on these 4 s; 39 mm on average over all 203 walk/run clips (bench/projection_quality.py)
+    assert out.mpjpe.mean() < 0.04
+    # A MuJoCo contact at the sampled instant in 76 % of the frames: with stiff contacts the loaded foot
     # bounces off by a few mm between impacts.
     assert out.contacts.any(axis=1).mean() >= 0.6
     after = physical_metrics(out.simulated, body=HumanoidSurface(body_from_joints(walk)))
-    # MuJoCo's soft contacts let the loaded soles sink a little; the issue asks for <= 1 mm.
-    assert after["penetrate"] < 1.0  # mm: 0.54 here, 0.74 on average over all 203 walk/run clips
+    # MuJoCo's soft contacts let the loaded soles sink a little: 1.7 mm here; the issue's 1 mm is a mean
+    # over clips (test_walking_and_running_clips_meet_the_targets), and clips spread (p90 1.8 mm).
+    assert after["penetrate"] < 2.5
+
+
+@pytest.mark.slow
+def test_walking_and_running_clips_meet_the_targets(mocap_dir) -> None:
+    """The issue's all-clips targets on every 8th walking/running clip (26 of 203; the whole set is
+    bench/projection_quality.py: 100 % tracked, 39.5 mm, Penetrate 0.75 mm, Skate 14.1 -> 10.8 mm)."""
+    import re
+
+    from physmotion.io.importer import import_clip, load_manifest
+    from physmotion.physics.humanoid import foot_lift
+
+    locomotion = re.compile(r"\b(walk|walks|walking|run|runs|running|jog|jogs|jogging)\b")
+    clips = [c for c in load_manifest(mocap_dir) if locomotion.search(c.captions[0].lower())][::8]
+    ok, mpjpe, before, after = [], [], [], []
+    for info in clips:
+        motion = import_clip(info)
+        out = project(motion.joints, motion.fps)
+        body = body_from_joints(motion.joints)
+        surface = HumanoidSurface(body)
+        raised = motion.joints + np.array([0, foot_lift(body), 0], np.float32)
+        ok.append(bool(out.success))
+        mpjpe.append(float(out.mpjpe.mean()))
+        before.append(physical_metrics(raised, fps=motion.fps, body=surface))
+        after.append(physical_metrics(out.simulated, fps=motion.fps, body=surface))
+    mean = lambda rows, key: float(np.mean([r[key] for r in rows]))  # noqa: E731
+    print(f"\n{sum(ok)}/{len(ok)} tracked, MPJPE {1000 * np.mean(mpjpe):.1f} mm, penetrate "
+          f"{mean(before, 'penetrate'):.2f} -> {mean(after, 'penetrate'):.2f}, skate "
+          f"{mean(before, 'skate'):.2f} -> {mean(after, 'skate'):.2f}")
+    assert len(clips) >= 25
+    assert np.mean(ok) >= 0.95
+    assert np.mean(mpjpe) <= 0.060
+    assert mean(after, "penetrate") <= 1.0
+    assert mean(after, "skate") <= mean(before, "skate")
 
 
 def test_deterministic_and_batch_equals_one_by_one(walk: np.ndarray) -> None:
@@ -52,7 +86,7 @@ def test_a_floating_walk_comes_down(walk: np.ndarray) -> None:
     before = physical_metrics(lifted.astype(np.float32), body=surface)["float"]
     after = physical_metrics(out.simulated, body=surface)["float"]
     print(f"\nfloat {before:.1f} -> {after:.1f} mm")
-    # The issue asks for -90 %. Measured 75.5 -> 0.1 mm: the reference, floating for more than a second,
+    # The issue asks for -90 %. Measured 75.5 -> 0.6 mm: the reference, floating for more than a second,
     # is lowered onto the floor (physics/shaping.py); tracked 10 cm up, the body hopped (7.8 mm).
     assert after < 0.1 * before
 
@@ -82,8 +116,8 @@ def test_a_dragged_root_skates_less(mocap_dir) -> None:
     before = physical_metrics(dragged.astype(np.float32), body=surface)["skate"]
     after = physical_metrics(out.joints, body=surface)["skate"]
     print(f"\nskate {before:.1f} -> {after:.1f} mm")
-    # Measured 6.5 -> 4.2 mm. The simulated feet creep by themselves (the undragged bow: 0.7 -> 2.6 mm),
-    # so a drag of 0.2 m does not come out lower (2.8 -> 3.5 mm).
+    # Measured 6.5 -> 4.1 mm. The simulated feet creep by themselves (the undragged bow: 0.7 -> 2.6 mm),
+    # so a drag of 0.2 m does not come out lower (2.8 -> 3.4 mm).
     assert after < 0.75 * before
 
 
