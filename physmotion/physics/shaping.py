@@ -12,13 +12,13 @@ motions (tests/physics/test_projection.py):
   the floor by about 1.5 cm in mid-swing, and a simulated body a few degrees off its reference (the
   pelvis pitched 2 degrees forward lowers a swing foot by ~1.3 cm) scuffs the floor, lands short and
   is then dragged to its target while loaded: the feet of a slow walk ended 25 cm behind their
-  reference and slid at 0.5 m/s in stance. Over all clips, lifting each swing foot by its own height
-  (up to 3 cm) cut Skate from 17.3 to 12.8 mm (input 14.1) and the MPJPE from 57.9 to 47.1 mm, with
-  success from 97.5 to 99.5 %; a fixed 3 cm did better still (100 %, 39 mm, Skate 10.7 mm) and also
-  lifts the feet that generated motions drag along the floor (their Phys-Err under P: 20.4 -> 18.5
-  mm on 16 prompts). Only while the other foot is on the floor (in a run's flight phase it raised
-  Float) and only for a foot that moves (lifting the hovering feet of a bow made them creep: Skate of
-  a standing bow 2.6 -> 5.4 mm).
+  reference and slid at 0.5 m/s in stance. Over all clips (root residual up to 0.5 W then), lifting
+  each swing foot by its own height (up to 3 cm) cut Skate from 17.3 to 12.8 mm (input 14.1) and the
+  MPJPE from 57.9 to 47.1 mm, with success from 97.5 to 99.5 %; a fixed 3 cm did better still
+  (100 %, 39 mm, Skate 10.7 mm) and also lifts the feet that generated motions drag along the floor
+  (their Phys-Err under P: 20.4 -> 18.5 mm on 16 prompts). Only while the other foot is on the floor
+  (in a run's flight phase it raised Float) and only for a foot that moves (lifting the hovering feet
+  of a bow made them creep: Skate of a standing bow 2.6 -> 5.4 mm).
 
 MPJPE and the metrics are always measured against the unshaped input.
 """
