@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from physmotion.physics.humanoid import layout
-from physmotion.physics.surface import geoms_lowest, lowest_point
+from physmotion.physics.surface import geoms_lowest
 from physmotion.skeleton import JOINT_INDEX
 
 _IK_STEPS = 4  # Gauss-Newton steps of swing_clearance's leg IK
@@ -50,9 +50,14 @@ class ShapingConfig:
 def shape_reference(model, qpos: np.ndarray, dt: float, config: ShapingConfig | None = None) -> np.ndarray:
     """The reference qpos (N, 70) at step ``dt`` corrected as ``config`` says (a new array)."""
     cfg = config or ShapingConfig()
-    out = to_floor(model, qpos, dt, cfg.float_window) if cfg.ground else qpos.copy()
+    geo = _Geometry(model, qpos)  # one kinematics pass serves both corrections
+    out = qpos.copy()
+    if cfg.ground:
+        shift = _floor_shift(geo.lowest, dt, cfg.float_window)
+        out[:, 2] += shift
+        geo.feet += shift[:, None]  # a vertical shift moves every height by as much
     if cfg.clearance > 0.0:
-        out = swing_clearance(model, out, dt, cfg)
+        _lift_swing_feet(model, out, geo, dt, cfg)
     return out
 
 
@@ -64,25 +69,11 @@ def to_floor(model, qpos: np.ndarray, dt: float, float_window: float) -> np.ndar
     is taken to float, not to jump: a jump's flight lasts well under a second. It is lowered by the
     least height it keeps over that window (a running minimum, smoothed over 0.1 s), so that it stands
     on the floor. Measured: a walk lifted 10 cm was tracked while the root PD kept pulling the body up
-    toward it, and it hopped (Float 75.5 -> 7.8 mm); lowered first, 0.6 mm (test_projection.py). The
+    toward it, and it hopped (Float 75.5 -> 7.8 mm); lowered first, 0.8 mm (test_projection.py). The
     jumps of the bundled mocap and all walking/running clips project as before. 0: never lowered.
     """
-    import mujoco
-    from scipy.ndimage import gaussian_filter1d, minimum_filter1d
-
-    data = mujoco.MjData(model)
-    low = np.zeros(len(qpos))
-    for k, q in enumerate(qpos):
-        data.qpos[:] = q
-        mujoco.mj_kinematics(model, data)
-        low[k] = lowest_point(model, data)
-    drop = np.zeros_like(low)
-    if float_window > 0.0:
-        width = 2 * round(float_window / dt / 2) + 1  # odd, so the window is centred
-        drop = np.maximum(minimum_filter1d(low, size=width, mode="nearest"), 0.0)
-        drop = gaussian_filter1d(drop, 0.1 / dt, mode="nearest")
     out = qpos.copy()
-    out[:, 2] += -drop + np.maximum(drop - low, 0.0)  # down where it floated, then up out of the floor
+    out[:, 2] += _floor_shift(_Geometry(model, qpos).lowest, dt, float_window)
     return out
 
 
@@ -96,29 +87,62 @@ def swing_clearance(model, qpos: np.ndarray, dt: float, config: ShapingConfig) -
     nine hinges (hip, knee, ankle) for the ankle body's pose (near a straight knee the lift is far from
     linear: on a real walk three steps missed 3 cm by up to 1 mm, four land within 0.1 mm).
     """
+    out = qpos.copy()
+    _lift_swing_feet(model, out, _Geometry(model, qpos), dt, config)
+    return out
+
+
+def _floor_shift(lowest: np.ndarray, dt: float, float_window: float) -> np.ndarray:
+    """Vertical shift (N,) of each frame for :func:`to_floor`, from its lowest point (N,)."""
+    from scipy.ndimage import gaussian_filter1d, minimum_filter1d
+
+    drop = np.zeros_like(lowest)
+    if float_window > 0.0:
+        width = 2 * round(float_window / dt / 2) + 1  # odd, so the window is centred
+        drop = np.maximum(minimum_filter1d(lowest, size=width, mode="nearest"), 0.0)
+        drop = gaussian_filter1d(drop, 0.1 / dt, mode="nearest")
+    return -drop + np.maximum(drop - lowest, 0.0)  # down where it floated, then up out of the floor
+
+
+class _Geometry:
+    """Per-frame geometry of a reference: lowest (N,) point of the body, feet (N, 2) lowest point of
+    each foot (left, right), ankles (N, 2, 2) horizontal position of each ankle body; legs: the two
+    :class:`_Leg`."""
+
+    def __init__(self, model, qpos: np.ndarray) -> None:
+        import mujoco
+
+        lay = layout(model)
+        self.legs = [_Leg(model, lay, side) for side in ("left", "right")]
+        geoms = np.arange(1, model.ngeom)  # all but the floor
+        foot_of = [np.isin(geoms, leg.geoms) for leg in self.legs]
+        data = mujoco.MjData(model)
+        n = len(qpos)
+        self.lowest, self.feet, self.ankles = np.zeros(n), np.zeros((n, 2)), np.zeros((n, 2, 2))
+        for k, q in enumerate(qpos):
+            data.qpos[:] = q
+            mujoco.mj_kinematics(model, data)
+            low = geoms_lowest(model, data, geoms)
+            self.lowest[k] = low.min()
+            self.feet[k] = [low[m].min() for m in foot_of]
+            self.ankles[k] = [data.xpos[leg.ankle, :2] for leg in self.legs]
+
+
+def _lift_swing_feet(model, qpos: np.ndarray, geo: _Geometry, dt: float, config: ShapingConfig) -> None:
+    """:func:`swing_clearance` in place on ``qpos``, whose geometry (heights up to date) is ``geo``."""
     import mujoco
 
-    lay = layout(model)
-    legs = [_Leg(model, lay, side) for side in ("left", "right")]
+    moved = np.gradient(geo.ankles, dt, axis=0) if len(qpos) > 1 else np.zeros_like(geo.ankles)
+    speed = np.linalg.norm(moved, axis=-1)  # (N, 2)
+    lifts = config.clearance * np.clip(speed / config.clearance_speed - 1.0, 0.0, 1.0)
+    lifts[geo.feet[:, ::-1] > config.support] = 0.0  # the other foot is off the floor too
     data = mujoco.MjData(model)
     jacp, jacr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
-    out = qpos.copy()
-    heights = np.zeros((len(out), 2))  # lowest point of each foot
-    where = np.zeros((len(out), 2, 2))  # each ankle's horizontal position
-    for k in range(len(out)):
-        data.qpos[:] = out[k]
-        mujoco.mj_kinematics(model, data)
-        heights[k] = [float(geoms_lowest(model, data, leg.geoms).min()) for leg in legs]
-        where[k] = [data.xpos[leg.ankle, :2] for leg in legs]
-    moved = np.gradient(where, dt, axis=0) if len(out) > 1 else np.zeros_like(where)
-    speed = np.linalg.norm(moved, axis=-1)
-    lifts = config.clearance * np.clip(speed / config.clearance_speed - 1.0, 0.0, 1.0)
-    lifts[heights[:, ::-1] > config.support] = 0.0  # the other foot is off the floor too
     for k, i in zip(*np.nonzero(lifts > 0.0)):
-        leg, lift = legs[i], lifts[k, i]
-        data.qpos[:] = out[k]
+        leg = geo.legs[i]
+        data.qpos[:] = qpos[k]
         mujoco.mj_kinematics(model, data)
-        goal_pos = data.xpos[leg.ankle] + np.array([0.0, 0.0, lift])  # MuJoCo z is up
+        goal_pos = data.xpos[leg.ankle] + np.array([0.0, 0.0, lifts[k, i]])  # MuJoCo z is up
         goal_quat = data.xquat[leg.ankle].copy()
         for _ in range(_IK_STEPS):
             mujoco.mj_comPos(model, data)  # the Jacobian needs the com-based frames
@@ -130,8 +154,7 @@ def swing_clearance(model, qpos: np.ndarray, dt: float, config: ShapingConfig) -
             err[3:] = data.xmat[leg.ankle].reshape(3, 3) @ err[3:]
             data.qpos[leg.qpos] += jac.T @ np.linalg.solve(jac @ jac.T + 1e-4 * np.eye(6), err)
             mujoco.mj_kinematics(model, data)
-        out[k, leg.qpos] = data.qpos[leg.qpos]
-    return out
+        qpos[k, leg.qpos] = data.qpos[leg.qpos]
 
 
 class _Leg:
