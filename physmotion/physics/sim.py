@@ -112,11 +112,11 @@ def simulate(
     failed_at, resets, shifts = None, 0, 0
     for k in range(n):
         qpos[k] = data.qpos
-        mpjpe[k] = float(np.mean(np.linalg.norm(data.xpos[lay.body_ids] - ref.joints_mj[k], axis=-1)))
+        mpjpe[k] = _mpjpe(data, lay, ref.joints_mj[k])
         if mpjpe[k] > fail_mpjpe and reset_on_fail and follow_drift:
             offset = data.qpos[:2] - ref.qpos[k, :2]  # MuJoCo x/y: horizontal
             drifted = ref.shifted(k, offset, cfg.substeps)
-            pose_error = float(np.mean(np.linalg.norm(data.xpos[lay.body_ids] - drifted.joints_mj[k], axis=-1)))
+            pose_error = _mpjpe(data, lay, drifted.joints_mj[k])
             if pose_error <= fail_mpjpe:
                 ref, mpjpe[k] = drifted, pose_error
                 shifts += 1
@@ -129,7 +129,7 @@ def simulate(
             resets += 1
             reset_state(model, data, ref, k)
             qpos[k] = data.qpos
-            mpjpe[k] = float(np.mean(np.linalg.norm(data.xpos[lay.body_ids] - ref.joints_mj[k], axis=-1)))
+            mpjpe[k] = _mpjpe(data, lay, ref.joints_mj[k])
         elif mpjpe[k] > fail_mpjpe:
             failed_at = k
             qpos[k:] = data.qpos
@@ -151,6 +151,11 @@ def simulate(
     return Rollout(qpos, mpjpe, res_f, res_t, contacts, failed_at, resets, shifts)
 
 
+def _mpjpe(data, lay, target: np.ndarray) -> float:
+    """Mean distance (m) of the 22 skeleton bodies to ``target`` (22, 3), MuJoCo frame."""
+    return float(np.mean(np.linalg.norm(data.xpos[lay.body_ids] - target, axis=-1)))
+
+
 def simulate_batch(
     jobs: list[tuple[object, Reference, Controller]],
     config: HumanoidConfig | None = None,
@@ -167,6 +172,10 @@ def simulate_batch(
     threads = threads or os.cpu_count() or 1
     if threads == 1 or len(jobs) == 1:
         return [simulate(m, r, c, config, fail_mpjpe, reset_on_fail, follow_drift) for m, r, c in jobs]
+
+    def run(job: tuple[object, Reference, Controller]) -> Rollout:
+        return simulate(*job, config, fail_mpjpe, reset_on_fail, follow_drift)
+
     with ThreadPoolExecutor(max_workers=threads) as pool:
-        return list(pool.map(lambda job: simulate(*job, config, fail_mpjpe, reset_on_fail, follow_drift), jobs))
+        return list(pool.map(run, jobs))
 
