@@ -4,8 +4,9 @@ Usage: python bench/physics.py [--batch 64] [--seconds 6]
 - raw: mj_step rate of the humanoid holding a standing pose (no Python in the loop but the call);
 - projection: sim steps per second inside project() (retarget, reference shaping, inverse dynamics,
   closed-loop tracking at the simulation rate, resampling), and its ratio to raw;
-- latency of one motion (warm: best of three after a first call), and throughput of a batch with 1 thread and with one thread per core
-  (mujoco.rollout cannot run this closed-loop controller; see physics/sim.py).
+- latency of one motion (warm: best of three after a first call), and throughput of a batch with
+  1 thread and with one thread per core (mujoco.rollout cannot run this closed-loop controller; see
+  physics/sim.py).
 """
 
 from __future__ import annotations

@@ -8,20 +8,15 @@ on the humanoid's collision geometry (the input raised by the sole depth, as the
 from __future__ import annotations
 
 import argparse
-import re
 import time
 
 import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from physmotion.io.importer import import_clip, load_manifest
-from physmotion.metrics import physical_metrics
-from physmotion.physics.humanoid import body_from_joints, foot_lift
-from physmotion.physics.projection import ProjectionConfig, project
-from physmotion.physics.surface import HumanoidSurface
-
-LOCOMOTION = re.compile(r"\b(walk|walks|walking|run|runs|running|jog|jogs|jogging)\b")
+from physmotion.eval.projection_quality import locomotion_clips, measure_projection
+from physmotion.io.importer import import_clip
+from physmotion.physics.projection import ProjectionConfig
 
 
 def main() -> None:
@@ -29,20 +24,15 @@ def main() -> None:
     parser.add_argument("--mocap", default="../shared/data/mocap")
     parser.add_argument("--limit", type=int, default=0)
     args = parser.parse_args()
-    clips = [c for c in load_manifest(args.mocap) if LOCOMOTION.search(c.captions[0].lower())]
+    clips = locomotion_clips(args.mocap)
     clips = clips[: args.limit] if args.limit else clips
     cfg = ProjectionConfig()
     rows = []
     start = time.perf_counter()
     for info in clips:
         motion = import_clip(info)
-        out = project(motion.joints, motion.fps, cfg)
-        body = body_from_joints(motion.joints)
-        surface = HumanoidSurface(body)  # both measured on the humanoid's geometry, same body
-        raised = motion.joints + np.array([0, foot_lift(body), 0], np.float32)
-        before = physical_metrics(raised, fps=motion.fps, body=surface)
-        after = physical_metrics(out.simulated, fps=motion.fps, body=surface)
-        rows.append((info, out, before, after))
+        m = measure_projection(motion.joints, motion.fps, cfg)
+        rows.append((info, m.result, m.before, m.after))
     seconds = time.perf_counter() - start
 
     ok = [r for r in rows if r[1].success]

@@ -115,10 +115,11 @@ def simulate(
         mpjpe[k] = _mpjpe(data, lay, ref.joints_mj[k])
         if mpjpe[k] > fail_mpjpe and reset_on_fail and follow_drift:
             offset = data.qpos[:2] - ref.qpos[k, :2]  # MuJoCo x/y: horizontal
-            drifted = ref.shifted(k, offset, cfg.substeps)
-            pose_error = _mpjpe(data, lay, drifted.joints_mj[k])
-            if pose_error <= fail_mpjpe:
-                ref, mpjpe[k] = drifted, pose_error
+            moved = ref.joints_mj[k].copy()
+            moved[:, :2] += offset
+            pose_error = _mpjpe(data, lay, moved)
+            if pose_error <= fail_mpjpe:  # only drifted: the copy of the reference is made only now
+                ref, mpjpe[k] = ref.shifted(k, offset, cfg.substeps), pose_error
                 shifts += 1
         # Contacts with the floor (geom 0) by the foot bodies; the other geom of a floor pair is the body's.
         pairs = data.contact.geom[: data.ncon]

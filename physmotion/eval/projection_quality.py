@@ -1,0 +1,48 @@
+"""The physics projection on captured clips: which clips the issue's targets speak of, and how one clip
+is measured. Shared by ``bench/projection_quality.py`` (all clips) and the tests (a subset).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from physmotion.io.importer import ClipInfo, load_manifest
+from physmotion.metrics import physical_metrics
+from physmotion.physics.humanoid import body_from_joints, foot_lift
+from physmotion.physics.projection import ProjectedMotion, ProjectionConfig, project
+from physmotion.physics.surface import HumanoidSurface
+
+LOCOMOTION = re.compile(r"\b(walk|walks|walking|run|runs|running|jog|jogs|jogging)\b")
+"""A clip whose first caption matches is a walking/running clip."""
+
+
+def locomotion_clips(mocap_dir: str | Path) -> list[ClipInfo]:
+    """The walking and running clips of a mocap directory, in manifest order."""
+    return [c for c in load_manifest(mocap_dir) if LOCOMOTION.search(c.captions[0].lower())]
+
+
+@dataclass
+class ClipProjection:
+    """One projected clip: P's result and the physical metrics of its input and of the simulation, both
+    on the humanoid's geometry of the clip's own body (the input raised by the sole depth, as P does)."""
+
+    result: ProjectedMotion
+    before: dict[str, float]
+    after: dict[str, float]
+
+
+def measure_projection(
+    joints: np.ndarray, fps: float, config: ProjectionConfig | None = None
+) -> ClipProjection:
+    """Project ``joints`` (T, 22, 3), data convention, at ``fps`` and measure input and output."""
+    result = project(joints, fps, config)
+    body = body_from_joints(joints)
+    surface = HumanoidSurface(body)
+    raised = joints + np.array([0, foot_lift(body), 0], np.float32)
+    before = physical_metrics(raised, fps=fps, body=surface)
+    after = physical_metrics(result.simulated, fps=fps, body=surface)
+    return ClipProjection(result, before, after)
