@@ -4,7 +4,8 @@ Usage: python bench/physics.py [--batch 64] [--seconds 6]
 - raw: mj_step rate of the humanoid holding a standing pose (no Python in the loop but the call);
 - projection: sim steps per second inside project() (retarget, reference shaping, inverse dynamics,
   closed-loop tracking at the simulation rate, resampling), and its ratio to raw;
-- latency of one motion (warm: best of three after a first call), and throughput of a batch with
+- latency of one motion (warm: best of three after a first call), also with the root residual
+  recomputed at every simulation step instead of every ``residual_every``-th, and throughput of a batch with
   1 thread and with one thread per core (mujoco.rollout cannot run this closed-loop controller; see
   physics/sim.py).
 """
@@ -14,6 +15,7 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from dataclasses import replace
 
 import mujoco
 import numpy as np
@@ -43,6 +45,16 @@ def raw_steps_per_second(cfg: ProjectionConfig, seconds: float = 3.0) -> float:
     return best
 
 
+def _best_latency(joints: np.ndarray, cfg: ProjectionConfig) -> float:
+    """Best of three warm runs of one motion (the raw rate is a best of runs too)."""
+    best = float("inf")
+    for _ in range(3):
+        start = time.perf_counter()
+        project(joints, config=cfg)
+        best = min(best, time.perf_counter() - start)
+    return best
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--mocap", default="../shared/data/mocap")
@@ -56,11 +68,9 @@ def main() -> None:
 
     raw = raw_steps_per_second(cfg)
     one = project(joints, config=cfg)  # warm-up: the first call also pays lazy imports (scipy.ndimage, ...)
-    latency = float("inf")
-    for _ in range(3):  # best of three, as the raw rate is a best of runs
-        start = time.perf_counter()
-        project(joints, config=cfg)
-        latency = min(latency, time.perf_counter() - start)
+    latency = _best_latency(joints, cfg)
+    every_step = replace(cfg, humanoid=replace(cfg.humanoid, residual_every=1))
+    latency_every_step = _best_latency(joints, every_step)
     batch = np.stack([joints] * args.batch)
     timings = {}
     for threads in (1, os.cpu_count() or 1):
@@ -76,6 +86,8 @@ def main() -> None:
     table.add_row("projection loop, 1 motion (sim steps/s)", f"{sim_steps / latency:,.0f}",
                   f"{sim_steps / latency / raw:.2f}")
     table.add_row("latency, 1 motion, warm (s)", f"{latency:.2f}", f"tracked: {bool(one.success)}")
+    table.add_row("  the same, root residual at every sim step (s)", f"{latency_every_step:.2f}",
+                  f"{latency_every_step / latency:.2f}x the default's time")
     for threads, secs in timings.items():
         table.add_row(f"batch {args.batch}, {threads} thread(s): motions/s", f"{args.batch / secs:.2f}",
                       f"{args.batch * sim_steps / secs / raw:.2f}")

@@ -194,6 +194,9 @@ class HumanoidConfig:
 
     sim_dt: float = 1.0 / 120.0  # implicitfast + Newton at 1/120 s is the fastest stable set-up measured
     control_dt: float = 1.0 / 30.0  # PhysDiff's policy rate (Appendix C: 60 Hz sim, 30 Hz control)
+    # The root residual is recomputed (in Python) every this many simulation steps and held between;
+    # the steps in between run in one ``mj_step(nstep=...)`` call, in C, without the GIL.
+    residual_every: int = 1
     total_mass: float = 70.0  # kg
     gains: dict[str, PDGain] = field(default_factory=default_gains)
     limits_deg: dict[str, tuple[Range, Range, Range]] = field(default_factory=default_limits)
@@ -222,6 +225,9 @@ class HumanoidConfig:
         ratio = self.control_dt / self.sim_dt
         if abs(ratio - round(ratio)) > 1e-6:
             raise ShapeError(f"control_dt must be a multiple of sim_dt, got ratio {ratio:.4f}")
+        if self.residual_every < 1 or round(ratio) % self.residual_every:
+            raise ShapeError(f"residual_every must divide the {round(ratio)} simulation steps per control step, "
+                             f"got {self.residual_every}")
         if self.total_mass <= 0:
             raise ShapeError(f"total_mass must be positive, got {self.total_mass}")
         missing = [n for n in JOINT_NAMES if self.mass_fractions.get(n, 0.0) <= 0.0]

@@ -142,13 +142,16 @@ def simulate(
         data.ctrl[:] = ctrl
         data.qfrc_applied[:] = qfrc
         force = torque = 0.0
-        for s in range(1, cfg.substeps + 1):
+        every = cfg.residual_every
+        for s in range(every, cfg.substeps + 1, every):
+            # The wrench held over simulation steps s - every + 1 .. s is the one ending at step s.
             wrench = qfrc[:6] + controller.residual(data, ref, k * cfg.substeps + s, cfg.substeps)
             data.qfrc_applied[:6] = wrench
             force += math.hypot(*wrench[:3])
             torque += math.hypot(*wrench[3:])
-            mujoco.mj_step(model, data)
-        res_f[k + 1], res_t[k + 1] = force / weight / cfg.substeps, torque / weight / cfg.substeps
+            mujoco.mj_step(model, data, every)
+        updates = cfg.substeps // every
+        res_f[k + 1], res_t[k + 1] = force / weight / updates, torque / weight / updates
     return Rollout(qpos, mpjpe, res_f, res_t, contacts, failed_at, resets, shifts)
 
 

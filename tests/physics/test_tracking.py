@@ -1,7 +1,6 @@
-"""The simulation core and the model-based tracker on a real standing pose.
-
-Walking is NOT tracked yet (see the physics issue's progress note); these tests pin down what works:
-standing still on real mocap feet, determinism, batching, failure detection and the residual bound.
+"""The simulation core and the model-based tracker on a real standing pose: standing still on real mocap
+feet, determinism, batching, failure detection, the residual bound and its update rate. Tracking real
+walks is tested through the projection (test_projection.py).
 """
 
 from __future__ import annotations
@@ -10,7 +9,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from physmotion.physics.humanoid import body_from_joints, build_model, foot_lift
+from physmotion.errors import ShapeError
+from physmotion.physics.humanoid import HumanoidConfig, body_from_joints, build_model, foot_lift
 from physmotion.physics.retarget import joints_to_qpos
 from physmotion.physics.sim import simulate, simulate_batch
 from physmotion.physics.surface import lowest_point
@@ -55,6 +55,18 @@ def test_tracker_holds_a_real_standing_pose(real_walk: np.ndarray) -> None:
     assert roll.mpjpe[5:].max() < 0.02  # metres
     assert roll.contacts[5:].mean() > 0.9  # both heels and toes carry the body
     assert roll.residual_force.mean() < 0.05  # fractions of body weight: the feet do the work
+
+
+def test_residual_held_over_several_steps_still_holds_the_pose(real_walk: np.ndarray) -> None:
+    """The residual recomputed every other step (one mj_step call of 2): the same standing hold."""
+    model, ref = _standing_reference(real_walk)
+    every_step = simulate(model, ref, ModelBasedTracker(model), HumanoidConfig())
+    held = simulate(model, ref, ModelBasedTracker(model), HumanoidConfig(residual_every=2))
+    for roll in (every_step, held):
+        assert roll.failed_at is None and roll.mpjpe[5:].max() < 0.02
+    assert not np.array_equal(every_step.qpos, held.qpos)  # the setting reached the loop
+    with pytest.raises(ShapeError, match="residual_every"):
+        HumanoidConfig(residual_every=3)  # 4 simulation steps per control step at 120 Hz
 
 
 def test_simulation_is_deterministic_and_batch_equals_one_by_one(real_walk: np.ndarray) -> None:
