@@ -226,8 +226,8 @@ class HumanoidConfig:
         if abs(ratio - round(ratio)) > 1e-6:
             raise ShapeError(f"control_dt must be a multiple of sim_dt, got ratio {ratio:.4f}")
         if self.residual_every < 1 or round(ratio) % self.residual_every:
-            raise ShapeError(f"residual_every must divide the {round(ratio)} simulation steps per control step, "
-                             f"got {self.residual_every}")
+            raise ShapeError(f"residual_every must divide the {round(ratio)} simulation steps per control "
+                             f"step, got {self.residual_every}")
         if self.total_mass <= 0:
             raise ShapeError(f"total_mass must be positive, got {self.total_mass}")
         missing = [n for n in JOINT_NAMES if self.mass_fractions.get(n, 0.0) <= 0.0]

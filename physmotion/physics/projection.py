@@ -68,8 +68,8 @@ def _default_tracking() -> TrackingConfig:
     # so the residual cannot hold a floating body up (at 1 W the simulated walks floated more than their
     # input). Torque 1 W x 1 m: at 0.5 the backward and tired walks tipped over once the torque
     # saturated (5 of 6 such failures tracked at 1.0).
-    return TrackingConfig(residual_force=0.3, residual_torque=1.0, residual_lift=0.1, root_kp=10000.0, root_kd=1000.0,
-                          root_rot_kp=3000.0, root_rot_kd=30.0)  # fmt: skip
+    return TrackingConfig(residual_force=0.3, residual_torque=1.0, residual_lift=0.1,
+                          root_kp=10000.0, root_kd=1000.0, root_rot_kp=3000.0, root_rot_kd=30.0)
 
 
 @dataclass

@@ -141,7 +141,8 @@ def _foot_box_corners(model) -> list[tuple[int, int, np.ndarray]]:
     """(geom id, body id, (4, 3) local bottom-corner offsets) of every box on the feet."""
     import mujoco
 
-    feet = {mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, n) for n in JOINT_NAMES if "ankle" in n or "foot" in n}
+    body = mujoco.mjtObj.mjOBJ_BODY
+    feet = {mujoco.mj_name2id(model, body, n) for n in JOINT_NAMES if "ankle" in n or "foot" in n}
     out = []
     for g in range(model.ngeom):
         if model.geom_bodyid[g] in feet and model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX:
@@ -176,7 +177,8 @@ def prepare_reference(model, qpos: np.ndarray, dt: float, config: TrackingConfig
     jacp = np.zeros((3, model.nv))
     saved_flags = inv.opt.disableflags
     try:
-        inv.opt.disableflags = saved_flags | mujoco.mjtDisableBit.mjDSBL_CONTACT | mujoco.mjtDisableBit.mjDSBL_LIMIT
+        off = mujoco.mjtDisableBit
+        inv.opt.disableflags = saved_flags | off.mjDSBL_CONTACT | off.mjDSBL_LIMIT
         for k in range(n):
             data.qpos[:], data.qvel[:], data.qacc[:] = qpos[k], qvel[k], qacc[k]
             mujoco.mj_inverse(inv, data)
@@ -196,7 +198,8 @@ def prepare_reference(model, qpos: np.ndarray, dt: float, config: TrackingConfig
                 gen = np.einsum("pcv,ec->pev", jt, pyr).reshape(-1, model.nv)  # (P*4, nv)
                 a = gen[:, :6].T  # (6, P*4)
                 reg = 1e-3  # prefer small forces among the many that explain the wrench
-                c, _ = nnls(np.vstack([a, reg * np.eye(a.shape[1])]), np.concatenate([t[:6], np.zeros(a.shape[1])]))
+                target = np.concatenate([t[:6], np.zeros(a.shape[1])])
+                c, _ = nnls(np.vstack([a, reg * np.eye(a.shape[1])]), target)
                 t = t - c @ gen
             tau[k] = t
     finally:
