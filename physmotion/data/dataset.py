@@ -7,6 +7,9 @@ caption at random, rounds the length down to a multiple of ``unit_length`` (one 
 of the time) and crops at a random start. Unlike the original it does not pad to 196 frames:
 :func:`collate` pads a batch to its longest item and returns a mask. Randomness comes from
 ``(seed, epoch, index)``, so a run is reproducible with any number of workers.
+
+``crop`` (default ``max_frames``) sets the longest window drawn, apart from which motions are kept:
+training on 120-frame windows keeps the motions of up to 196 frames and crops them.
 """
 
 from __future__ import annotations
@@ -100,6 +103,7 @@ class MotionDataset(Dataset):
         random_crop: bool = True,
         normalize: bool = True,
         seed: int = 0,
+        crop: int | None = None,
     ) -> None:
         self.root = Path(root)
         if not self.root.is_dir():
@@ -108,7 +112,10 @@ class MotionDataset(Dataset):
         if not self.items:
             raise PhysmotionError(f"{root}: split '{split}' has no usable motion")
         self.normalizer = Normalizer.load(self.root) if normalize else None
-        self.max_frames, self.unit_length = max_frames, unit_length
+        if crop is not None and not 0 < crop <= max_frames:
+            raise PhysmotionError(f"crop must be 1..{max_frames} frames, got {crop}")
+        # Longest window drawn; a separate knob from max_frames, which also decides which motions are kept.
+        self.crop, self.unit_length = crop or max_frames, unit_length
         self.random_crop, self.seed, self.epoch = random_crop, seed, 0
 
     def set_epoch(self, epoch: int) -> None:
@@ -124,14 +131,14 @@ class MotionDataset(Dataset):
         feats = item.features
         if self.random_crop:
             text = item.captions[rng.integers(len(item.captions))]
-            units = min(len(feats), self.max_frames) // self.unit_length
+            units = min(len(feats), self.crop) // self.unit_length
             if rng.integers(3) == 2 and units > 1:  # HumanML3D's 'double' coin: one unit shorter
                 units -= 1
             length = units * self.unit_length
             start = int(rng.integers(len(feats) - length + 1))
         else:
             text = item.captions[0]
-            length, start = min(len(feats), self.max_frames), 0
+            length, start = min(len(feats), self.crop), 0
         motion = feats[start : start + length]
         if self.normalizer is not None:
             motion = self.normalizer.normalize(motion)

@@ -89,7 +89,9 @@ def train_denoiser(cfg: TrainConfig, resume: bool = False, progress: bool = True
     if cfg.denoiser.max_frames < cfg.crop:
         raise PhysmotionError(f"crop {cfg.crop} is longer than the model's {cfg.denoiser.max_frames} frames")
 
-    dataset = MotionDataset(cfg.data, "train", max_frames=cfg.crop, random_crop=cfg.random_crop, seed=cfg.seed)
+    # The crop sets the window length only: every motion of up to 196 frames is kept and cropped. (Up to
+    # step 7904 the shipped model's run passed the crop as max_frames, which dropped the longer ones.)
+    dataset = MotionDataset(cfg.data, "train", crop=cfg.crop, random_crop=cfg.random_crop, seed=cfg.seed)
     encoder = load_text_encoder(cfg.text_encoder)
     cfg.denoiser.text_dim, cfg.denoiser.feature_dim = encoder.dim, dataset.normalizer.dim
     accel = Accelerator(cpu=cfg.device == "cpu", mixed_precision="bf16" if cfg.bf16 else "no")

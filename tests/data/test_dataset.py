@@ -81,3 +81,14 @@ def test_clear_errors(tmp_path: Path) -> None:
         MotionDataset(tmp_path / "nope")
     with pytest.raises(PhysmotionError, match="no split file"):
         MotionDataset(tmp_path)
+
+
+def test_crop_shortens_windows_without_dropping_motions(built_dir: Path) -> None:
+    """Training on 120-frame windows keeps the motions of 124 to 196 frames and crops them."""
+    whole = MotionDataset(built_dir, "train")
+    cropped = MotionDataset(built_dir, "train", crop=120)
+    assert len(cropped) == len(whole)
+    assert max(len(item.features) for item in cropped.items) > 124  # long motions are still there
+    assert max(cropped[i]["length"] for i in range(len(cropped))) <= 120
+    with pytest.raises(PhysmotionError, match="crop"):
+        MotionDataset(built_dir, "train", crop=0)
