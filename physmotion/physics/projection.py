@@ -52,8 +52,9 @@ def _default_humanoid() -> HumanoidConfig:
 
     The root residual is updated at 90 Hz (every 4th step) and held between: per step 98 / 99 / 98.5 /
     99.5 % at 45.7 / 47.4 / 46.5 / 48.4 mm (every 1 / 2 / 3 / 4 steps), Phys-Err 16.8 / 17.2 / 16.3 /
-    16.6 mm; every 6 / 12 steps the error grows (60 / 105 mm). On generated motions PhysDiff's Phys-Err
-    was 15.5 / 15.3 / 15.3 mm (every 1 / 3 / 4). Fewer Python calls per step make P faster (bench/physics.py).
+    16.6 mm; every 6 / 12 steps the error grows (60 / 105 mm). On generated motions (model at step 3229)
+    PhysDiff's Phys-Err was 15.5 / 15.3 / 15.3 mm (every 1 / 3 / 4). Fewer Python calls make P 1.18x
+    faster (bench/physics.py).
     """
     gains = default_gains()
     gains["ankle"] = PDGain(5000.0, 500.0, gains["ankle"].torque_limit)
