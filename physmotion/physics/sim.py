@@ -108,6 +108,8 @@ def simulate(
     res_f, res_t = np.zeros(n), np.zeros(n)
     contacts = np.zeros((n, 4), dtype=bool)
     weight = float(model.body_subtreemass[0]) * STANDARD_GRAVITY
+    every = cfg.residual_every  # sim steps per root-residual update (one mj_step call of that many)
+    updates = cfg.substeps // every
     reset_state(model, data, ref)
     failed_at, resets, shifts = None, 0, 0
     for k in range(n):
@@ -142,7 +144,6 @@ def simulate(
         data.ctrl[:] = ctrl
         data.qfrc_applied[:] = qfrc
         force = torque = 0.0
-        every = cfg.residual_every
         for s in range(every, cfg.substeps + 1, every):
             # The wrench held over simulation steps s - every + 1 .. s is the one ending at step s.
             wrench = qfrc[:6] + controller.residual(data, ref, k * cfg.substeps + s, cfg.substeps)
@@ -150,7 +151,6 @@ def simulate(
             force += math.hypot(*wrench[:3])
             torque += math.hypot(*wrench[3:])
             mujoco.mj_step(model, data, every)
-        updates = cfg.substeps // every
         res_f[k + 1], res_t[k + 1] = force / weight / updates, torque / weight / updates
     return Rollout(qpos, mpjpe, res_f, res_t, contacts, failed_at, resets, shifts)
 
