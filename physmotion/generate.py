@@ -59,6 +59,9 @@ class GenerateResult:
     motions: list[Motion]  # len(texts) * num, text-major
     features: list[np.ndarray]  # (T, 263) un-normalised, one per motion
     projections: ProjectionLog
+    # Per motion, the humanoid body (22, 3) whose simulation the output is, or None where the output is
+    # not P's (physics none, or no projection at the last step): the surface to measure it on.
+    bodies: list[np.ndarray | None] = field(default_factory=list)
 
 
 def check_request(texts: Sequence[str], config: GenerateConfig, model: MotionDiffusion) -> int:
@@ -114,20 +117,22 @@ def generate(
     feats = model.normalizer.denormalize(x.float().cpu().numpy())
     feats = [f[:n] for f, n in zip(feats, lengths)]
     joints = [recover_from_ric(f.astype(np.float64)) for f in feats]
+    bodies: list[np.ndarray | None] = [None] * len(joints)
     if cfg.physics == "physdiff" and hook_steps[-1:] == [cfg.sampler.steps - 1]:
         # The last step was projected, and DDIM's last step returns x0 itself: the output is P's
         # simulated motion, kept in physical coordinates (soles on the floor) rather than re-floored.
-        joints = projector.last_joints
+        joints, bodies = projector.last_joints, list(projector.last_bodies)
     if cfg.physics == "post":
         for k in range(cfg.post_projections):
             joints = projector.project_joints([on_data_floor(j) if k else j for j in joints])
+            bodies = list(projector.last_bodies)
             if on_step:
                 on_step(cfg.sampler.steps + k + 1, total)
     motions = [
         Motion(joints=j, fps=FPS, texts=[p], licence_tag=model.licence_tag, source=f"physmotion generate ({cfg.physics})")
         for j, p in zip(joints, prompts)
     ]
-    return GenerateResult(motions=motions, features=list(feats), projections=projector.log)
+    return GenerateResult(motions=motions, features=list(feats), projections=projector.log, bodies=bodies)
 
 
 def slug(text: str, limit: int = 40) -> str:

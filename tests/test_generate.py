@@ -34,8 +34,17 @@ def test_physdiff_and_post_call_the_projection(tiny_model) -> None:
     assert phys.projections.calls == 2
     post = generate(["a person walks"], _cfg(physics="post", post_projections=2), tiny_model)
     assert post.projections.calls == 2 and len(post.projections.selected) == 2
+    # The output is P's simulation: each motion comes with the humanoid body it was simulated with, the
+    # surface its physical metrics are measured on; the last step is projected, so physdiff's is too.
+    for out in (phys, post):
+        assert len(out.bodies) == 1 and out.bodies[0].shape == (22, 3) and np.all(np.isfinite(out.bodies[0]))
+    assert not np.array_equal(phys.bodies[0], post.bodies[0])  # bodies fitted to different motions
     # with this untrained model the humanoid falls, so imitation selection keeps the input: same as none
     none = generate(["a person walks"], _cfg(), tiny_model)
+    assert none.bodies == [None]
+    unprojected_end = generate(["a person walks"], _cfg(physics="physdiff", schedule="start:1,end:0"),
+                               tiny_model)
+    assert unprojected_end.bodies == [None]  # its last step was not projected: not P's output
     if not any(post.projections.selected):
         assert np.allclose(post.motions[0].joints, none.motions[0].joints)
 

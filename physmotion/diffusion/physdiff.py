@@ -72,23 +72,25 @@ class FeatureProjector:
         self.model, self.config, self.fps = model, config or ProjectionConfig(reset_on_fail=True, tau=0.2), fps
         self.log = ProjectionLog()
         self.last_joints: list[np.ndarray] = []  # P's output of the latest call, physical coordinates
+        self.last_bodies: list[np.ndarray] = []  # ... and the humanoid bodies it was simulated with
 
     def project_joints(self, joints: list[np.ndarray]) -> list[np.ndarray]:
         """Project a list of joint arrays (T_i, 22, 3); motions of equal length go through in one batch."""
         out: list[np.ndarray] = [np.empty(0)] * len(joints)
+        bodies: list[np.ndarray] = [np.empty(0)] * len(joints)
         by_len: dict[int, list[int]] = {}
         for i, j in enumerate(joints):
             by_len.setdefault(len(j), []).append(i)
         for idx in by_len.values():
             res = project(np.stack([joints[i] for i in idx]), self.fps, self.config)
             for k, i in enumerate(idx):
-                out[i] = res.joints[k]
+                out[i], bodies[i] = res.joints[k], res.body[k]
                 self.log.selected.append(bool(res.selected[k]))
                 self.log.tracked.append(bool(res.success[k]))
                 self.log.mpjpe_mm.append(float(1000 * res.mpjpe[k].mean()))
                 self.log.residual.append(float(res.residual_force[k].mean()))
         self.log.calls += 1
-        self.last_joints = out
+        self.last_joints, self.last_bodies = out, bodies
         return out
 
     def __call__(self, x0: torch.Tensor, lengths: list[int]) -> torch.Tensor:

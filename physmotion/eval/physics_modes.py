@@ -42,13 +42,13 @@ def compare_modes(
     surface: str = "humanoid",
 ) -> dict[str, dict[str, float]]:
     """Generate one motion per prompt in each mode; mode -> physical metrics (mean over motions) plus
-    ``seconds_per_motion`` and ``tracked`` (fraction of projections in which the humanoid never fell)."""
-    base = base or GenerateConfig()
-    body = None
-    if surface == "humanoid":
-        from physmotion.physics.surface import HumanoidSurface
+    ``seconds_per_motion`` and ``tracked`` (fraction of projections in which the humanoid never fell).
 
-        body = HumanoidSurface()
+    surface "humanoid": the humanoid's geometry, with the body P simulated for projected outputs and one
+    estimated from the joints otherwise; "joints": the joint-only surface model."""
+    base = base or GenerateConfig()
+    if surface not in ("humanoid", "joints"):
+        raise PhysmotionError(f"unknown surface {surface!r}: humanoid or joints")
     results: dict[str, dict[str, float]] = {}
     for mode in modes:
         cfg = parse_mode(mode, base)
@@ -56,6 +56,11 @@ def compare_modes(
         out = generate(list(prompts), cfg, model)
         seconds = time.perf_counter() - start
         joints = np.stack([m.joints for m in out.motions])
+        body = None
+        if surface == "humanoid":
+            from physmotion.physics.surface import HumanoidSurface
+
+            body = HumanoidSurface(out.bodies)  # P's own body where the output is P's
         row = physical_metrics(joints, FPS, body=body)
         row["seconds_per_motion"] = seconds / len(prompts)
         log = out.projections

@@ -160,11 +160,12 @@ def evaluate(
     captions = _captions(items, cfg.seed)
     real_emb = evaluator.encode_motions([it.features for it in items])
     text_emb = evaluator.encode_texts(captions)
-    body = _surface(cfg.surface)
+    if cfg.surface not in ("humanoid", "joints"):
+        raise PhysmotionError(f"unknown surface {cfg.surface!r}: humanoid or joints")
     total, done = cfg.repeats * len(items) * len(cfg.modes), 0
 
     rows: dict[str, dict[str, tuple[float, float]]] = {}
-    runs = [_real_run(evaluator, items, r, cfg, real_emb, text_emb, body) for r in range(cfg.repeats)]
+    runs = [_real_run(evaluator, items, r, cfg, real_emb, text_emb) for r in range(cfg.repeats)]
     rows[REAL] = _summarise(runs, None)
     for mode, gen_cfg in gen_configs.items():
         runs, per_text = [], []
@@ -175,11 +176,12 @@ def evaluate(
                 if on_progress:
                     on_progress(_done + n, total)
 
-            joints, seconds, fell = _generate(model, captions, items, run_cfg, cfg.generate_batch, tick)
+            joints, bodies, seconds, fell = _generate(model, captions, items, run_cfg, cfg.generate_batch,
+                                                      tick)
             done += len(items)
             emb = evaluator.encode_motions([joints_to_features(on_data_floor(j)) for j in joints])
             run = _scores(emb, text_emb, real_emb, r, cfg)
-            run.update(_physical(joints, body))
+            run.update(_physical(joints, _surface(cfg.surface, bodies)))
             run["sec/motion"] = seconds / len(items)
             if fell is not None:
                 run["ifr"] = fell
@@ -213,14 +215,14 @@ def _captions(items: list[MotionItem], seed: int) -> list[str]:
     return [it.captions[rng.integers(len(it.captions))] for it in items]
 
 
-def _surface(name: str):
+def _surface(name: str, bodies: Sequence[np.ndarray | None] | None = None):
+    """The body surface of the physical metrics: the humanoid (posed with P's bodies where given) or None
+    (the joint-only model)."""
     if name == "humanoid":
         from physmotion.physics.surface import HumanoidSurface
 
-        return HumanoidSurface()
-    if name == "joints":
-        return None
-    raise PhysmotionError(f"unknown surface {name!r}: humanoid or joints")
+        return HumanoidSurface(bodies)
+    return None
 
 
 def _crop(features: np.ndarray, rng: np.random.Generator, unit: int = 4) -> np.ndarray:
@@ -233,17 +235,20 @@ def _crop(features: np.ndarray, rng: np.random.Generator, unit: int = 4) -> np.n
     return features[start : start + length]
 
 
-def _real_run(evaluator, items, r, cfg, real_emb, text_emb, body) -> dict[str, float]:
+def _real_run(evaluator, items, r, cfg, real_emb, text_emb) -> dict[str, float]:
     rng = np.random.default_rng((cfg.seed, 2, r))
     crops = [_crop(it.features, rng) for it in items]
     run = _scores(evaluator.encode_motions(crops), text_emb, real_emb, r, cfg)
-    run.update(_physical([recover_from_ric(it.features.astype(np.float64)) for it in items], body))
+    real = [recover_from_ric(it.features.astype(np.float64)) for it in items]
+    run.update(_physical(real, _surface(cfg.surface)))
     return run
 
 
-def _generate(model, captions, items, gen_cfg, batch, tick) -> tuple[list[np.ndarray], float, float | None]:
-    """Final joints of every motion, wall seconds, and the fraction whose last projection fell."""
+def _generate(model, captions, items, gen_cfg, batch, tick) -> tuple[list, list, float, float | None]:
+    """Final joints of every motion, P's body of each (or None), wall seconds, and the fraction whose last
+    projection fell."""
     joints: list[np.ndarray] = []
+    bodies: list[np.ndarray | None] = []
     fell: list[bool] = []
     start = time.perf_counter()
     for i in range(0, len(items), batch):
@@ -251,10 +256,11 @@ def _generate(model, captions, items, gen_cfg, batch, tick) -> tuple[list[np.nda
         lengths = [len(it.features) for it in items[chunk]]
         out = generate(captions[chunk], replace(gen_cfg, seed=gen_cfg.seed + i), model, lengths=lengths)
         joints += [m.joints for m in out.motions]
+        bodies += out.bodies
         if out.projections.tracked:
             fell += [not t for t in out.projections.tracked[-len(lengths) :]]
         tick(len(joints))
-    return joints, time.perf_counter() - start, (float(np.mean(fell)) if fell else None)
+    return joints, bodies, time.perf_counter() - start, (float(np.mean(fell)) if fell else None)
 
 
 def _scores(emb, text_emb, real_emb, r, cfg) -> dict[str, float]:

@@ -108,6 +108,8 @@ class ProjectedMotion:
     success: (B,) the episode ran to the end without MPJPE passing the failure threshold.
     With ``follow_drift`` a body that only drifted counts as a success; its ``mpjpe`` to the input grows.
     selected: (B,) the simulation was kept (MPJPE below ``tau`` throughout).
+    body: (B, 22, 3) float64 rest offsets of the humanoid each motion was simulated with (bone lengths,
+    fitted feet): the surface to measure the simulated motion on (``HumanoidSurface(body)``).
     """
 
     joints: np.ndarray
@@ -118,6 +120,7 @@ class ProjectedMotion:
     contacts: np.ndarray
     success: np.ndarray
     selected: np.ndarray
+    body: np.ndarray
 
 
 def as_joints(motion: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -189,11 +192,12 @@ def project(
         qpos = shape_reference(model, qpos, cfg.humanoid.control_dt, cfg.shaping)
         ref = prepare_reference(model, qpos, cfg.humanoid.control_dt, cfg.tracking)
         jobs.append((model, ref, ModelBasedTracker(model, cfg.tracking)))
-        setups.append((model, lift))
+        setups.append((model, lift, body))
     rolls = simulate_batch(jobs, cfg.humanoid, fail_mpjpe=cfg.tau, threads=cfg.threads,
                            reset_on_fail=cfg.reset_on_fail, follow_drift=cfg.follow_drift)
     outs = [_back_to_input_rate(roll, model, lift, x, fps, ctrl_fps, cfg.tau, cfg.reset_on_fail)
-            for roll, (model, lift), x in zip(rolls, setups, joints)]  # fmt: skip
+            | {"body": body}
+            for roll, (model, lift, body), x in zip(rolls, setups, joints)]  # fmt: skip
     stacked = {k: np.stack([o[k] for o in outs]) for k in outs[0]}
     result = ProjectedMotion(**stacked)
     if not batched:

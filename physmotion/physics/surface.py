@@ -9,11 +9,15 @@ model of :mod:`physmotion.metrics.geometry` assumes the default foot, and on Ban
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
+from physmotion.errors import ShapeError
 from physmotion.physics.humanoid import HumanoidConfig, body_from_joints, build_model
 from physmotion.physics.retarget import joints_to_qpos
-from physmotion.skeleton import FOOT_JOINTS, JOINT_NAMES
+from physmotion.skeleton import FOOT_JOINTS, JOINT_NAMES, NUM_JOINTS
+
 
 def lowest_point(model, data) -> float:
     """Height (m, MuJoCo z) of the lowest point of the body (every geom but the floor, geom 0)."""
@@ -38,11 +42,23 @@ def geoms_lowest(model, data, geoms: np.ndarray) -> np.ndarray:
 class HumanoidSurface:
     """A :class:`physmotion.metrics.geometry.BodySurface` read from the MuJoCo humanoid.
 
-    offsets: the body (22, 3) to pose; by default each call measures it from the joints it is given
-    (:func:`body_from_joints`). Foot patches: the ankle box (heel) and the toe box.
+    offsets: the body to pose: (22, 3) for every motion, or one per motion of a batch ((B, 22, 3) or a
+    list whose None entries mean "estimate"); by default each call measures it from the joints it is given
+    (:func:`body_from_joints`). For P's output, pass the body P simulated (``ProjectedMotion.body``):
+    the estimate from the simulated joints can pitch the feet a few degrees off the humanoid's, which
+    moved the soles by up to 10 mm against MuJoCo's (measured on generated motions).
+    Foot patches: the ankle box (heel) and the toe box.
     """
 
-    def __init__(self, offsets: np.ndarray | None = None, config: HumanoidConfig | None = None) -> None:
+    def __init__(
+        self,
+        offsets: np.ndarray | Sequence[np.ndarray | None] | None = None,
+        config: HumanoidConfig | None = None,
+    ) -> None:
+        if offsets is not None and not isinstance(offsets, np.ndarray):
+            offsets = list(offsets)
+        elif offsets is not None and offsets.shape[-2:] != (NUM_JOINTS, 3):
+            raise ShapeError(f"offsets must be (22, 3) or (B, 22, 3), got {offsets.shape}")
         self.offsets, self.config = offsets, config or HumanoidConfig()
         self._cache: tuple[object, tuple[np.ndarray, np.ndarray]] | None = None
 
@@ -61,7 +77,8 @@ class HumanoidSurface:
         lowest = np.zeros(flat.shape[:2])
         feet = np.zeros(flat.shape[:2] + (4,))
         for b, motion in enumerate(flat):
-            offsets = body_from_joints(motion) if self.offsets is None else self.offsets
+            offsets = self._body(b, len(flat))
+            offsets = body_from_joints(motion) if offsets is None else offsets
             model = build_model(offsets, self.config)
             data = mujoco.MjData(model)
             patch = np.array([model.geom(JOINT_NAMES[j]).id for j in FOOT_JOINTS])
@@ -73,6 +90,15 @@ class HumanoidSurface:
         result = lowest.reshape(x.shape[:-2]), feet.reshape(x.shape[:-2] + (4,))
         self._cache = (joints, result)
         return result
+
+    def _body(self, b: int, count: int) -> np.ndarray | None:
+        """The given body of motion ``b`` of ``count``, or None (estimate it)."""
+        given = self.offsets
+        if given is None or (isinstance(given, np.ndarray) and given.ndim == 2):
+            return given
+        if len(given) != count:
+            raise ShapeError(f"{len(given)} bodies given for {count} motions")
+        return given[b]
 
     def lowest_height(self, joints: np.ndarray) -> np.ndarray:
         return self._per_frame(joints)[0]
