@@ -18,6 +18,17 @@ def seeded_generator(seed: int, *key: int) -> torch.Generator:
     return torch.Generator().manual_seed(int(np.random.SeedSequence([seed, *key]).generate_state(1)[0]))
 
 
+def bf16_helps(device: str) -> bool:
+    """Whether bf16 autocast speeds training up on ``device``: a CUDA GPU with bf16, or a CPU with native
+    bf16 (AVX512-BF16 or AMX, as oneDNN reports it). Elsewhere the CPU emulates bf16, and that is slow:
+    the default denoiser (batch 32 x 120 frames) took 31.7 s per step with autocast against 1.6 s in
+    fp32 on an AMD EPYC with AVX2 only (measured)."""
+    if device.startswith("cuda"):
+        return torch.cuda.is_available() and torch.cuda.is_bf16_supported()
+    # Private, but it is the check PyTorch's own CPU autocast tests use; there is no public one.
+    return bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
+
+
 def batch_indices(n: int, batch: int, seed: int, step: int) -> tuple[int, list[int]]:
     """(epoch, dataset indices) of the batch at ``step``: epoch-wise permutations, the last partial
     batch dropped."""

@@ -1,4 +1,5 @@
-"""Training the denoiser: DDPM (1000 steps, cosine), x0 loss, AdamW, EMA, gradient clipping, bf16 autocast.
+"""Training the denoiser: DDPM (1000 steps, cosine), x0 loss, AdamW, EMA, gradient clipping, bf16 autocast
+(by default only where the hardware has bf16 natively: :func:`physmotion.training.bf16_helps`).
 
 MDM's recipe (GuyTevet/motion-diffusion-model, train/training_loop.py): predict x0, masked MSE on the
 valid frames, classifier-free text dropout of 10%, AdamW with lr 1e-4. ``accelerate`` handles the device
@@ -16,7 +17,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +31,7 @@ from physmotion.diffusion.schedule import DiffusionConfig, training_scheduler
 from physmotion.errors import PhysmotionError
 from physmotion.motion import write_atomic
 from physmotion.text.encoder import load_text_encoder
-from physmotion.training import batch_indices, loss_bar, seeded_generator
+from physmotion.training import batch_indices, bf16_helps, loss_bar, seeded_generator
 
 STATE_FILE = "train_state.pt"
 LOSS_FILE = "loss.csv"
@@ -55,7 +56,7 @@ class TrainConfig:
     ema_decay: float = 0.999
     grad_clip: float = 1.0
     text_drop: float = 0.1
-    bf16: bool = True
+    bf16: bool | None = None  # bf16 autocast; None: where the hardware has it natively (bf16_helps)
     device: str = "cpu"
     seed: int = 0
     checkpoint_minutes: float = 5.0
@@ -94,6 +95,8 @@ def train_denoiser(cfg: TrainConfig, resume: bool = False, progress: bool = True
     dataset = MotionDataset(cfg.data, "train", crop=cfg.crop, random_crop=cfg.random_crop, seed=cfg.seed)
     encoder = load_text_encoder(cfg.text_encoder)
     cfg.denoiser.text_dim, cfg.denoiser.feature_dim = encoder.dim, dataset.normalizer.dim
+    if cfg.bf16 is None:
+        cfg = replace(cfg, bf16=bf16_helps(cfg.device))  # saved as decided
     accel = Accelerator(cpu=cfg.device == "cpu", mixed_precision="bf16" if cfg.bf16 else "no")
     torch.manual_seed(cfg.seed)
     net = build_denoiser(cfg.denoiser)

@@ -83,3 +83,16 @@ def test_cli_train_and_resume(built_dir: Path, tmp_path: Path) -> None:
     assert res.returncode == 0 and "trained to step 3" in res.stdout
     res = run("train", "denoiser", "--data", tmp_path / "missing", "--out", tmp_path / "x")
     assert res.returncode == 1 and "no such dataset folder" in res.stderr
+
+
+def test_bf16_is_used_only_where_the_hardware_has_it(built_dir: Path, tmp_path: Path) -> None:
+    """Unset, bf16 autocast follows bf16_helps (emulated bf16 made a CPU step 20x slower); the run
+    saves the precision it used, and an explicit choice is kept."""
+    from physmotion.training import bf16_helps
+
+    train_denoiser(tiny_config(built_dir, tmp_path / "auto", steps=1, bf16=None), progress=False)
+    saved = json.loads((tmp_path / "auto" / "config.json").read_text())["info"]["train"]["bf16"]
+    assert saved is bf16_helps("cpu")
+    assert bf16_helps("cpu") == bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
+    train_denoiser(tiny_config(built_dir, tmp_path / "off", steps=1, bf16=False), progress=False)
+    assert json.loads((tmp_path / "off" / "config.json").read_text())["info"]["train"]["bf16"] is False
