@@ -2,7 +2,8 @@
 
 Usage: python bench/physdiff_quality.py [--model DIR] [--prompts 32] [--seed 0]
 Rows: none, post:1, post:4 (as many projections as PhysDiff's default), physdiff:end:4,space:1.
-Metrics on the humanoid's MuJoCo geometry posed on the joints (PhysDiff's Penetrate/Float/Skate/Phys-Err, mm).
+Metrics on the humanoid's MuJoCo geometry posed on the joints, with the body P simulated for projected outputs
+(PhysDiff's Penetrate/Float/Skate/Phys-Err, mm).
 """
 
 from __future__ import annotations
