@@ -34,6 +34,19 @@ def parse_mode(mode: str, base: GenerateConfig) -> GenerateConfig:
     raise PhysmotionError(f"bad mode {mode!r}: use none, post:K or physdiff:<schedule>")
 
 
+def metric_surface(name: str, bodies: Sequence[np.ndarray | None] | None = None):
+    """The body surface of the physical metrics by name: "humanoid" (its geometry, posed with P's body
+    where ``bodies`` gives one, e.g. ``GenerateResult.bodies``, else with one estimated from the joints)
+    or "joints" (None: the joint-only surface model)."""
+    if name == "humanoid":
+        from physmotion.physics.surface import HumanoidSurface
+
+        return HumanoidSurface(bodies)
+    if name == "joints":
+        return None
+    raise PhysmotionError(f"unknown surface {name!r}: humanoid or joints")
+
+
 def compare_modes(
     model: MotionDiffusion,
     prompts: Sequence[str],
@@ -47,8 +60,7 @@ def compare_modes(
     surface "humanoid": the humanoid's geometry, with the body P simulated for projected outputs and one
     estimated from the joints otherwise; "joints": the joint-only surface model."""
     base = base or GenerateConfig()
-    if surface not in ("humanoid", "joints"):
-        raise PhysmotionError(f"unknown surface {surface!r}: humanoid or joints")
+    metric_surface(surface)  # a bad name fails before any work
     results: dict[str, dict[str, float]] = {}
     for mode in modes:
         cfg = parse_mode(mode, base)
@@ -56,12 +68,7 @@ def compare_modes(
         out = generate(list(prompts), cfg, model)
         seconds = time.perf_counter() - start
         joints = np.stack([m.joints for m in out.motions])
-        body = None
-        if surface == "humanoid":
-            from physmotion.physics.surface import HumanoidSurface
-
-            body = HumanoidSurface(out.bodies)  # P's own body where the output is P's
-        row = physical_metrics(joints, FPS, body=body)
+        row = physical_metrics(joints, FPS, body=metric_surface(surface, out.bodies))
         row["seconds_per_motion"] = seconds / len(prompts)
         log = out.projections
         row["tracked"] = float(np.mean(log.tracked)) if log.tracked else float("nan")

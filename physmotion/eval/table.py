@@ -36,7 +36,7 @@ from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.physdiff import joints_to_features, on_data_floor, parse_schedule
 from physmotion.errors import PhysmotionError
 from physmotion.eval.evaluator import Evaluator
-from physmotion.eval.physics_modes import parse_mode
+from physmotion.eval.physics_modes import metric_surface, parse_mode
 from physmotion.features.humanml3d import recover_from_ric
 from physmotion.generate import GenerateConfig, generate
 from physmotion.metrics import physical_metrics
@@ -160,8 +160,7 @@ def evaluate(
     captions = _captions(items, cfg.seed)
     real_emb = evaluator.encode_motions([it.features for it in items])
     text_emb = evaluator.encode_texts(captions)
-    if cfg.surface not in ("humanoid", "joints"):
-        raise PhysmotionError(f"unknown surface {cfg.surface!r}: humanoid or joints")
+    metric_surface(cfg.surface)  # a bad name fails before any work
     total, done = cfg.repeats * len(items) * len(cfg.modes), 0
 
     rows: dict[str, dict[str, tuple[float, float]]] = {}
@@ -181,7 +180,7 @@ def evaluate(
             done += len(items)
             emb = evaluator.encode_motions([joints_to_features(on_data_floor(j)) for j in joints])
             run = _scores(emb, text_emb, real_emb, r, cfg)
-            run.update(_physical(joints, _surface(cfg.surface, bodies)))
+            run.update(_physical(joints, metric_surface(cfg.surface, bodies)))
             run["sec/motion"] = seconds / len(items)
             if fell is not None:
                 run["ifr"] = fell
@@ -215,16 +214,6 @@ def _captions(items: list[MotionItem], seed: int) -> list[str]:
     return [it.captions[rng.integers(len(it.captions))] for it in items]
 
 
-def _surface(name: str, bodies: Sequence[np.ndarray | None] | None = None):
-    """The body surface of the physical metrics: the humanoid (posed with P's bodies where given) or None
-    (the joint-only model)."""
-    if name == "humanoid":
-        from physmotion.physics.surface import HumanoidSurface
-
-        return HumanoidSurface(bodies)
-    return None
-
-
 def _crop(features: np.ndarray, rng: np.random.Generator, unit: int = 4) -> np.ndarray:
     """HumanML3D's evaluation crop: length down to a multiple of ``unit``, one unit less a third of the time."""
     units = len(features) // unit
@@ -240,7 +229,7 @@ def _real_run(evaluator, items, r, cfg, real_emb, text_emb) -> dict[str, float]:
     crops = [_crop(it.features, rng) for it in items]
     run = _scores(evaluator.encode_motions(crops), text_emb, real_emb, r, cfg)
     real = [recover_from_ric(it.features.astype(np.float64)) for it in items]
-    run.update(_physical(real, _surface(cfg.surface)))
+    run.update(_physical(real, metric_surface(cfg.surface)))
     return run
 
 

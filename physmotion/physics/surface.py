@@ -55,10 +55,13 @@ class HumanoidSurface:
         offsets: np.ndarray | Sequence[np.ndarray | None] | None = None,
         config: HumanoidConfig | None = None,
     ) -> None:
-        if offsets is not None and not isinstance(offsets, np.ndarray):
-            offsets = list(offsets)
-        elif offsets is not None and offsets.shape[-2:] != (NUM_JOINTS, 3):
-            raise ShapeError(f"offsets must be (22, 3) or (B, 22, 3), got {offsets.shape}")
+        if isinstance(offsets, np.ndarray):
+            if offsets.ndim not in (2, 3) or offsets.shape[-2:] != (NUM_JOINTS, 3):
+                raise ShapeError(f"offsets must be (22, 3) or (B, 22, 3), got {offsets.shape}")
+            if offsets.ndim == 3:
+                offsets = list(offsets)
+        elif offsets is not None:
+            offsets = list(offsets)  # one body (or None) per motion
         self.offsets, self.config = offsets, config or HumanoidConfig()
         self._cache: tuple[object, tuple[np.ndarray, np.ndarray]] | None = None
 
@@ -94,7 +97,7 @@ class HumanoidSurface:
     def _body(self, b: int, count: int) -> np.ndarray | None:
         """The given body of motion ``b`` of ``count``, or None (estimate it)."""
         given = self.offsets
-        if given is None or (isinstance(given, np.ndarray) and given.ndim == 2):
+        if not isinstance(given, list):  # None, or one body for every motion
             return given
         if len(given) != count:
             raise ShapeError(f"{len(given)} bodies given for {count} motions")
