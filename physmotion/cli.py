@@ -114,7 +114,8 @@ def project_motion(
 
     motion = Motion.load(path)
     result = project(motion.joints, motion.fps)
-    replace(motion, joints=result.joints, rotations=None, offsets=None).save(out)
+    body = result.body if result.selected else None  # the input kept is not the humanoid's motion
+    replace(motion, joints=result.joints, rotations=None, offsets=None, humanoid=body).save(out)
     kept = "simulation kept" if result.selected else "tracking failed: input kept (flagged)"
     console.print(
         f"wrote {out}: {kept}; MPJPE mean {1000 * result.mpjpe.mean():.0f} mm, "
@@ -128,7 +129,8 @@ def metrics(
     paths: list[Path] = typer.Argument(..., help="Motion .npz files (joints, fps)."),
     surface: str = typer.Option(
         "humanoid", help="Body surface for Penetrate/Float/Skate: 'humanoid' (MuJoCo geometry posed on "
-        "the joints) or 'joints' (a light model built from the joints alone)."),
+        "the joints: the simulated body where the file carries it, as generate writes for projected "
+        "motions) or 'joints' (a light model built from the joints alone)."),
 ) -> None:
     """Print the physical metrics (PhysDiff, EDGE/Morph, BioMoDiffuse) of one or more motions."""
     from physmotion.metrics import format_table, physical_metrics
@@ -143,7 +145,7 @@ def metrics(
         if surface == "humanoid":
             from physmotion.physics.surface import HumanoidSurface
 
-            body = HumanoidSurface()
+            body = HumanoidSurface(motion.humanoid)  # P's body where the file has it, else estimated
         results[path.name] = physical_metrics(motion.joints, fps=motion.fps, body=body)
     console.print(format_table(results, title=f"physical metrics ({surface} surface)"))
 

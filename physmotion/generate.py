@@ -59,9 +59,12 @@ class GenerateResult:
     motions: list[Motion]  # len(texts) * num, text-major
     features: list[np.ndarray]  # (T, 263) un-normalised, one per motion
     projections: ProjectionLog
-    # Per motion, the humanoid body (22, 3) whose simulation the output is, or None where the output is
-    # not P's (physics none, or no projection at the last step): the surface to measure it on.
-    bodies: list[np.ndarray | None] = field(default_factory=list)
+
+    @property
+    def bodies(self) -> list[np.ndarray | None]:
+        """Per motion, the humanoid body (22, 3) whose simulation the output is (``Motion.humanoid``), or
+        None where the output is not P's (physics none, or no projection at the last step)."""
+        return [m.humanoid for m in self.motions]
 
 
 def check_request(texts: Sequence[str], config: GenerateConfig, model: MotionDiffusion) -> int:
@@ -129,10 +132,11 @@ def generate(
             if on_step:
                 on_step(cfg.sampler.steps + k + 1, total)
     motions = [
-        Motion(joints=j, fps=FPS, texts=[p], licence_tag=model.licence_tag, source=f"physmotion generate ({cfg.physics})")
-        for j, p in zip(joints, prompts)
+        Motion(joints=j, fps=FPS, texts=[p], licence_tag=model.licence_tag,
+               source=f"physmotion generate ({cfg.physics})", humanoid=b)
+        for j, p, b in zip(joints, prompts, bodies)
     ]
-    return GenerateResult(motions=motions, features=list(feats), projections=projector.log, bodies=bodies)
+    return GenerateResult(motions=motions, features=list(feats), projections=projector.log)
 
 
 def slug(text: str, limit: int = 40) -> str:

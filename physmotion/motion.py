@@ -24,6 +24,9 @@ class Motion:
     rotations: (T, 22, 3, 3) float32 local rotations (see :mod:`physmotion.skeleton`), or None.
     offsets: (22, 3) rest offsets of this body in metres, or None (needed with rotations).
     fps: frames per second. text: caption(s). licence_tag: "NC" for non-commercial data, else "".
+    humanoid: (22, 3) rest offsets of the simulated humanoid whose motion this is (the physics
+    projection's output: ``ProjectedMotion.body``), or None. The physical metrics pose that body's
+    geometry on the joints instead of one estimated from them.
     """
 
     joints: np.ndarray
@@ -33,12 +36,17 @@ class Motion:
     texts: list[str] = field(default_factory=list)
     licence_tag: str = ""
     source: str = ""
+    humanoid: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.joints = np.asarray(self.joints, dtype=np.float32)
         check_joints(self.joints)
         if self.fps <= 0 or not np.isfinite(self.fps):
             raise ShapeError(f"fps must be a positive number, got {self.fps}")
+        if self.humanoid is not None:
+            self.humanoid = np.asarray(self.humanoid, dtype=np.float64)
+            if self.humanoid.shape != (NUM_JOINTS, 3) or not np.all(np.isfinite(self.humanoid)):
+                raise ShapeError(f"humanoid must be finite rest offsets ({NUM_JOINTS}, 3), got {self.humanoid.shape}")
 
     @property
     def num_frames(self) -> int:
@@ -59,7 +67,7 @@ class Motion:
         return replace(self, rotations=rot.astype(np.float32), offsets=offsets.astype(np.float32))
 
     def save(self, path: str | Path) -> None:
-        """Write an .npz (joints, rotations, offsets, fps, text, licence_tag) atomically."""
+        """Write an .npz (joints, rotations, offsets, humanoid, fps, text, licence_tag) atomically."""
         arrays: dict[str, np.ndarray] = {
             "joints": self.joints,
             "fps": np.float32(self.fps),
@@ -71,6 +79,8 @@ class Motion:
             arrays["rotations"] = np.asarray(self.rotations, dtype=np.float32)
         if self.offsets is not None:
             arrays["offsets"] = np.asarray(self.offsets, dtype=np.float32)
+        if self.humanoid is not None:
+            arrays["humanoid"] = np.asarray(self.humanoid, dtype=np.float64)
         write_atomic(path, lambda f: np.savez(f, **arrays))
 
     @classmethod
@@ -92,6 +102,7 @@ class Motion:
                     texts=[t for t in text.split("\n") if t],
                     licence_tag=str(data["licence_tag"]) if "licence_tag" in data else "",
                     source=str(data["source"]) if "source" in data else "",
+                    humanoid=data["humanoid"] if "humanoid" in data else None,
                 )
         except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
             raise MotionFormatError(f"{path}: not a readable .npz file ({exc})") from None

@@ -1,5 +1,6 @@
 """The command line, run as a user runs it: a subprocess, its exit code, stdout/stderr and files."""
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -88,6 +89,17 @@ def test_metrics_prints_a_table_and_refuses_bad_files(mocap_dir: Path, tmp_path:
     res = run("metrics", npz, tmp_path / "lifted.npz")
     assert res.returncode == 0, res.stderr
     assert "penetrate" in res.stdout and "lifted.npz" in res.stdout and "PhysDiff" in res.stdout
+    # A file that carries the simulated body (generate writes it for projected motions) is measured on
+    # that body: here the default humanoid's, whose feet sit otherwise than the walk's fitted ones.
+    from physmotion.skeleton import REST_OFFSETS
+
+    walk = Motion.load(npz)
+    walk.humanoid = REST_OFFSETS
+    walk.save(tmp_path / "with_body.npz")
+    res = run("metrics", npz, tmp_path / "with_body.npz")
+    row = next(line for line in res.stdout.splitlines() if "penetrate" in line)
+    estimated, given = (float(v) for v in re.findall(r"\d+\.\d+", row)[:2])
+    assert estimated != given
     (tmp_path / "junk.npz").write_text("junk")
     res = run("metrics", tmp_path / "junk.npz")
     assert res.returncode == 1 and res.stderr.startswith("error: ") and res.stderr.count("\n") == 1
@@ -105,5 +117,6 @@ def test_project_writes_the_simulated_motion(mocap_dir: Path, tmp_path: Path) ->
     projected = Motion.load(out)
     assert projected.joints.shape == (60, 22, 3) and not np.array_equal(projected.joints, short.joints)
     assert projected.licence_tag == short.licence_tag
+    assert projected.humanoid is not None and projected.humanoid.shape == (22, 3)  # for `metrics`
     res = run("project", tmp_path / "missing.npz", "-o", tmp_path / "x.npz")
     assert res.returncode == 1 and res.stderr.startswith("error: ") and not (tmp_path / "x.npz").exists()

@@ -78,8 +78,8 @@ def test_standing_actions_stay_in_place(stats) -> None:
 def test_physdiff_lowers_phys_err_more_than_post_processing(model: MotionDiffusion) -> None:
     """32 prompts, 6 s: PhysDiff against no physics and against 4 projections after sampling.
 
-    Measured with step 7904, projected outputs on the body P simulated: none 50.5, post:4 21.1,
-    physdiff 14.0 mm (-72 %; the issue asks for -80 %)."""
+    Measured with step 7904, projected outputs on the body P simulated: none 50.5, post:4 22.1,
+    physdiff 13.5 mm (-73 %; the issue asks for -80 %)."""
     from physmotion.eval.physics_modes import compare_modes
     from physmotion.eval.prompts import PHYSICS_PROMPTS
 

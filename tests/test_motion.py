@@ -5,7 +5,7 @@ import pytest
 
 from physmotion.errors import MotionFormatError, ShapeError
 from physmotion.motion import Motion, write_atomic
-from physmotion.skeleton import rest_joints
+from physmotion.skeleton import REST_OFFSETS, rest_joints
 
 
 def _standing(frames: int = 10) -> np.ndarray:
@@ -20,6 +20,17 @@ def test_save_load_round_trip(tmp_path: Path) -> None:
     np.testing.assert_array_equal(back.joints, m.joints)
     np.testing.assert_array_equal(back.rotations, m.rotations)
     assert (back.texts, back.licence_tag, back.fps, back.source) == (m.texts, "NC", 20, "x")
+    assert back.humanoid is None
+
+
+def test_the_simulated_body_travels_with_the_motion(tmp_path: Path) -> None:
+    body = REST_OFFSETS * 1.1  # a taller body
+    Motion(_standing(), humanoid=body).save(tmp_path / "p.npz")
+    np.testing.assert_array_equal(Motion.load(tmp_path / "p.npz").humanoid, body)
+    with pytest.raises(ShapeError, match="humanoid"):
+        Motion(_standing(), humanoid=np.zeros((21, 3)))
+    with pytest.raises(ShapeError, match="humanoid"):
+        Motion(_standing(), humanoid=np.full((22, 3), np.nan))
 
 
 @pytest.mark.parametrize(

@@ -381,9 +381,10 @@ def skate(joints: np.ndarray, fps: float = FPS, *, lengths: Lengths = None, mask
     displacement of the foot joints in contact in both frames (0 for a pair with none).
 
     Foot joints: ankles and feet (FOOT_JOINTS). PhysDiff leaves "contact" open; here a foot joint is in
-    contact when its contact patch (the heel - the ankle box's sole behind the ankle - for an ankle, the
-    toe box for a foot joint) is within the 5 mm tolerance of the floor; CLoSD uses the same 5 mm margin
-    on the lowest joint, UHC the mesh vertices at or below the floor. The
+    contact when its contact patch is within the 5 mm tolerance of the floor: the toe box for a foot
+    joint; for an ankle the ankle box (heel to the ball of the foot) on the humanoid's geometry, its
+    heel alone on the joint-only surface model (0.2 mm of Skate apart on generated motions). CLoSD uses
+    the same 5 mm margin on the lowest joint, UHC the mesh vertices at or below the floor. The
     displacement is expressed per frame at ``params.reference_fps`` (20 fps, HumanML3D), so a foot
     sliding at 0.3 m/s scores 15 mm at any input rate. Frame pairs of all motions pooled.
     """
