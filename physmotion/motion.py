@@ -46,7 +46,8 @@ class Motion:
         if self.humanoid is not None:
             self.humanoid = np.asarray(self.humanoid, dtype=np.float64)
             if self.humanoid.shape != (NUM_JOINTS, 3) or not np.all(np.isfinite(self.humanoid)):
-                raise ShapeError(f"humanoid must be finite rest offsets ({NUM_JOINTS}, 3), got {self.humanoid.shape}")
+                shape = self.humanoid.shape
+                raise ShapeError(f"humanoid must be finite rest offsets ({NUM_JOINTS}, 3), got {shape}")
 
     @property
     def num_frames(self) -> int:
