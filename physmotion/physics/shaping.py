@@ -27,9 +27,10 @@ motions (tests/physics/test_projection.py):
   step-7904 model): Skate 9.62 -> 7.76 mm, Phys-Err 15.68 -> 13.95 mm, MPJPE 102 -> 72 mm. The 203
   captured walks/runs hardly have such frames: 99.0 % tracked at 47.9 mm, Phys-Err 16.65 mm, against
   99.5 % at 49.5 mm and 16.74 mm without it (same run).
-  Tried and not kept: taking the slip out of stance feet (summing the sole's slip over each stance and
-  moving the ankle against it by IK): Phys-Err 14.21 against 13.95 mm on the same 96 motions (Skate
-  -0.1, Float +0.1 mm) for 70 % more projection time; and a 4.5 cm clearance (Skate down, Float up as much).
+  Tried and not kept (the same 96 motions; runs differ by about 0.5 mm): taking the slip out of stance
+  feet (the sole's slip summed over each stance, the ankle moved against it by IK): Phys-Err 14.21 mm
+  for 70 % more projection time; a 4.5 cm clearance: Skate -0.6, Float +0.7 mm; smoothing the
+  grounding's raise over 0.1 / 0.2 s: 13.56 / 14.90 mm.
 
 MPJPE and the metrics are always measured against the unshaped input.
 """
@@ -150,7 +151,9 @@ class _Geometry:
             self.ankles[k] = [data.xpos[leg.ankle, :2] for leg in self.legs]
 
 
-def _lift_swing_feet(model, qpos: np.ndarray, geo: _Geometry, dt: float, config: ShapingConfig) -> np.ndarray:
+def _lift_swing_feet(
+    model, qpos: np.ndarray, geo: _Geometry, dt: float, config: ShapingConfig
+) -> np.ndarray:
     """:func:`swing_clearance` in place on ``qpos``, whose geometry (heights up to date) is ``geo``.
 
     Returns (N,) bool: frames where the support was found by speed (``config.stance_by_speed``), whose
