@@ -29,8 +29,8 @@ motions (tests/physics/test_projection.py):
   99.5 % at 49.5 mm and 16.74 mm without it (same run).
   Tried and not kept (the same 96 motions; runs differ by about 0.5 mm): taking the slip out of stance
   feet (the sole's slip summed over each stance, the ankle moved against it by IK): Phys-Err 14.21 mm
-  for 70 % more projection time; a 4.5 cm clearance: Skate -0.6, Float +0.7 mm; smoothing the
-  grounding's raise over 0.1 / 0.2 s: 13.56 / 14.90 mm.
+  for 70 % more projection time; a 4.5 cm clearance (32 of them): Skate -0.6, Float +0.7 mm;
+  smoothing the grounding's raise over 0.1 / 0.2 s: 13.56 / 14.90 mm.
 
 MPJPE and the metrics are always measured against the unshaped input.
 """
