@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from physmotion.physics.humanoid import layout
-from physmotion.physics.surface import geoms_lowest
+from physmotion.physics.surface import geoms_lowest, lowest_point
 from physmotion.skeleton import JOINT_INDEX
 
 _IK_STEPS = 4  # most Gauss-Newton steps of swing_clearance's leg IK
@@ -69,11 +69,10 @@ def shape_reference(model, qpos: np.ndarray, dt: float, config: ShapingConfig | 
     out = qpos.copy()
     shift = _floor_shift(geo.lowest, dt, cfg.float_window) if cfg.ground else np.zeros(len(qpos))
     out[:, 2] += shift
-    geo.feet += shift[:, None]  # a vertical shift moves every height by as much
+    geo.lowest += shift  # a vertical shift moves every height by as much
+    geo.feet += shift[:, None]
     if cfg.clearance > 0.0:
-        swapped = _lift_swing_feet(model, out, geo, dt, cfg)
-        if swapped.any():
-            _lower_onto_stance(model, out, swapped, geo.lowest + shift, dt)
+        _lift_swing_feet(model, out, geo, dt, cfg)
     return out
 
 
@@ -108,10 +107,7 @@ def swing_clearance(model, qpos: np.ndarray, dt: float, config: ShapingConfig) -
     nine hinges (hip, knee, ankle) for the ankle body's pose (:func:`_move_ankle`).
     """
     out = qpos.copy()
-    geo = _Geometry(model, qpos)
-    swapped = _lift_swing_feet(model, out, geo, dt, config)
-    if swapped.any():
-        _lower_onto_stance(model, out, swapped, geo.lowest, dt)
+    _lift_swing_feet(model, out, _Geometry(model, qpos), dt, config)
     return out
 
 
@@ -151,13 +147,9 @@ class _Geometry:
             self.ankles[k] = [data.xpos[leg.ankle, :2] for leg in self.legs]
 
 
-def _lift_swing_feet(
-    model, qpos: np.ndarray, geo: _Geometry, dt: float, config: ShapingConfig
-) -> np.ndarray:
-    """:func:`swing_clearance` in place on ``qpos``, whose geometry (heights up to date) is ``geo``.
-
-    Returns (N,) bool: frames where the support was found by speed (``config.stance_by_speed``), whose
-    swing foot was raised above the other foot and which :func:`_lower_onto_stance` must lower."""
+def _lift_swing_feet(model, qpos: np.ndarray, geo: _Geometry, dt: float, config: ShapingConfig) -> None:
+    """:func:`swing_clearance` in place on ``qpos``, whose geometry (heights up to date) is ``geo``; the
+    frames whose support was found by speed are then lowered onto it (:func:`_lower_onto_stance`)."""
     import mujoco
 
     moved = np.gradient(geo.ankles, dt, axis=0) if len(qpos) > 1 else np.zeros_like(geo.ankles)
@@ -174,7 +166,9 @@ def _lift_swing_feet(
     data = mujoco.MjData(model)
     for k, i in zip(*np.nonzero(lifts > 0.0)):
         _move_ankle(model, data, qpos[k], geo.legs[i], np.array([0.0, 0.0, lifts[k, i]]))  # MuJoCo z is up
-    return (swapped & (lifts > 0.0)).any(axis=1)
+    lowered = (swapped & (lifts > 0.0)).any(axis=1)
+    if lowered.any():
+        _lower_onto_stance(model, qpos, lowered, geo.lowest, dt)
 
 
 def _move_ankle(model, data, q: np.ndarray, leg: _Leg, move: np.ndarray) -> None:
@@ -226,12 +220,11 @@ def _lowest(model, qpos: np.ndarray) -> np.ndarray:
     import mujoco
 
     data = mujoco.MjData(model)
-    geoms = np.arange(1, model.ngeom)
     out = np.zeros(len(qpos))
     for k, q in enumerate(qpos):
         data.qpos[:] = q
         mujoco.mj_kinematics(model, data)
-        out[k] = geoms_lowest(model, data, geoms).min()
+        out[k] = lowest_point(model, data)
     return out
 
 
