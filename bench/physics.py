@@ -6,7 +6,7 @@ Usage: python bench/physics.py [--batch 64] [--seconds 6]
   closed-loop tracking at the simulation rate, resampling), and its ratio to raw;
 - latency of one motion (warm: best of three after a first call), also with the root residual
   recomputed at every simulation step instead of every ``residual_every``-th, and throughput of a batch with
-  1 thread and with one thread per core (mujoco.rollout cannot run this closed-loop controller; see
+  1 worker process and with one per core (mujoco.rollout cannot run this closed-loop controller; see
   physics/sim.py).
 """
 
@@ -73,10 +73,11 @@ def main() -> None:
     latency_every_step = _best_latency(joints, every_step)
     batch = np.stack([joints] * args.batch)
     timings = {}
-    for threads in (1, os.cpu_count() or 1):
+    for workers in (1, os.cpu_count() or 1):
+        project(batch[:workers], config=ProjectionConfig(workers=workers))  # start the worker pool
         start = time.perf_counter()
-        project(batch, config=ProjectionConfig(threads=threads))
-        timings[threads] = time.perf_counter() - start
+        project(batch, config=ProjectionConfig(workers=workers))
+        timings[workers] = time.perf_counter() - start
 
     table = Table(title=f"physics speed: {args.seconds:.0f} s walk, sim {1 / cfg.humanoid.sim_dt:.0f} Hz, "
                         f"control {1 / cfg.humanoid.control_dt:.0f} Hz")  # fmt: skip
@@ -88,8 +89,8 @@ def main() -> None:
     table.add_row("latency, 1 motion, warm (s)", f"{latency:.2f}", f"tracked: {bool(one.success)}")
     table.add_row("  the same, root residual at every sim step (s)", f"{latency_every_step:.2f}",
                   f"{latency_every_step / latency:.2f}x the default's time")
-    for threads, secs in timings.items():
-        table.add_row(f"batch {args.batch}, {threads} thread(s): motions/s", f"{args.batch / secs:.2f}",
+    for workers, secs in timings.items():
+        table.add_row(f"batch {args.batch}, {workers} process(es): motions/s", f"{args.batch / secs:.2f}",
                       f"{args.batch * sim_steps / secs / raw:.2f}")
     Console(width=140).print(table)
 

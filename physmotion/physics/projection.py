@@ -16,6 +16,7 @@ against that raised reference.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
@@ -32,8 +33,9 @@ from physmotion.physics.humanoid import (
 )
 from physmotion.physics.retarget import joints_to_qpos, qpos_to_joints
 from physmotion.physics.shaping import ShapingConfig, shape_reference
-from physmotion.physics.sim import Rollout, simulate_batch
+from physmotion.physics.sim import Rollout, simulate
 from physmotion.physics.tracking import ModelBasedTracker, TrackingConfig, prepare_reference
+from physmotion.physics.workers import map_in_workers
 from physmotion.skeleton import NUM_JOINTS
 
 
@@ -81,9 +83,9 @@ class ProjectionConfig:
     humanoid: HumanoidConfig = field(default_factory=_default_humanoid)
     tracking: TrackingConfig = field(default_factory=_default_tracking)
     tau: float = 0.5  # m: Morph's imitation selection keeps the simulation while MPJPE < tau
-    # 0: one per core. The root residual is Python at the simulation rate and holds the GIL, so threads
-    # gain little (bench/physics.py, batch 64: 4.70 motions/s on 2 threads, 4.31 on 1).
-    threads: int = 0
+    # Processes for a batch, 0: one per core. Each motion is projected whole in one worker process
+    # (physics/workers.py): the tracker is Python and holds the GIL, so threads gained little.
+    workers: int = 0
     # False: Morph's imitation selection (a failed episode returns the input, flagged). True: put the
     # humanoid back on the reference where it fails and go on, so the output is always simulated; PhysDiff
     # sampling uses this, because a kept kinematic input would carry its artefacts to the next step.
@@ -182,27 +184,28 @@ def project(
     joints, batched = as_joints(motion)
     if not fps > 0:
         raise ShapeError(f"fps must be positive, got {fps}")
-    ctrl_fps = 1.0 / cfg.humanoid.control_dt
-    jobs, setups = [], []
-    for x in joints:
-        body = body_from_joints(x, fps)
-        model = build_model(body, cfg.humanoid)
-        lift = foot_lift(body, cfg.humanoid)
-        qpos = resample_qpos(joints_to_qpos(x, model, lift=lift, config=cfg.humanoid), fps, ctrl_fps)
-        qpos = shape_reference(model, qpos, cfg.humanoid.control_dt, cfg.shaping)
-        ref = prepare_reference(model, qpos, cfg.humanoid.control_dt, cfg.tracking)
-        jobs.append((model, ref, ModelBasedTracker(model, cfg.tracking)))
-        setups.append((model, lift, body))
-    rolls = simulate_batch(jobs, cfg.humanoid, fail_mpjpe=cfg.tau, threads=cfg.threads,
-                           reset_on_fail=cfg.reset_on_fail, follow_drift=cfg.follow_drift)
-    outs = [_back_to_input_rate(roll, model, lift, x, fps, ctrl_fps, cfg.tau, cfg.reset_on_fail)
-            | {"body": body}
-            for roll, (model, lift, body), x in zip(rolls, setups, joints)]  # fmt: skip
+    outs = map_in_workers(partial(_project_one, fps=fps, config=cfg), list(joints), cfg.workers)
     stacked = {k: np.stack([o[k] for o in outs]) for k in outs[0]}
     result = ProjectedMotion(**stacked)
     if not batched:
         result = ProjectedMotion(**{k: v[0] for k, v in stacked.items()})
     return result
+
+
+def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig) -> dict[str, np.ndarray]:
+    """P of one motion x (T, 22, 3) float64: the fields of :class:`ProjectedMotion` for it."""
+    cfg = config
+    ctrl_fps = 1.0 / cfg.humanoid.control_dt  # the reference and the simulation run at the control rate
+    body = body_from_joints(x, fps)
+    model = build_model(body, cfg.humanoid)
+    lift = foot_lift(body, cfg.humanoid)
+    qpos = resample_qpos(joints_to_qpos(x, model, lift=lift, config=cfg.humanoid), fps, ctrl_fps)
+    qpos = shape_reference(model, qpos, cfg.humanoid.control_dt, cfg.shaping)
+    ref = prepare_reference(model, qpos, cfg.humanoid.control_dt, cfg.tracking)
+    roll = simulate(model, ref, ModelBasedTracker(model, cfg.tracking), cfg.humanoid, fail_mpjpe=cfg.tau,
+                    reset_on_fail=cfg.reset_on_fail, follow_drift=cfg.follow_drift)
+    out = _back_to_input_rate(roll, model, lift, x, fps, ctrl_fps, cfg.tau, cfg.reset_on_fail)
+    return out | {"body": body}
 
 
 def _back_to_input_rate(

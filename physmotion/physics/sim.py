@@ -1,10 +1,11 @@
 """The simulation core: run a controller along a reference, one motion or many at once.
 
 One closed-loop episode is a Python loop over control steps (30 Hz) of ``substeps`` ``mj_step`` calls
-(360 Hz in the projection). Batches run episodes on a thread pool, one ``MjData`` per episode:
-``mj_step`` releases the GIL, and ``mujoco.rollout`` cannot be used because the controller is
-closed-loop (the root PD reads the state), see shared/notes/tracking-controller.md §4.
-``bench/physics.py`` compares the two.
+(360 Hz in the projection). :func:`simulate_batch` runs episodes of any controller on a thread pool, one
+``MjData`` per episode (``mj_step`` releases the GIL); the projection instead runs each motion whole in a
+worker process (physics/workers.py), since its Python holds the GIL. ``mujoco.rollout`` cannot be used
+because the controller is closed-loop (the root PD reads the state), see shared/notes/tracking-controller.md
+§4. ``bench/physics.py`` compares raw stepping with the projection.
 """
 
 from __future__ import annotations

@@ -25,18 +25,41 @@ def lowest_point(model, data) -> float:
 
 
 def geoms_lowest(model, data, geoms: np.ndarray) -> np.ndarray:
-    """Lowest heights (G,) of the given geoms, all at once: a box reaches down by the sum of its half
+    """Lowest heights (G,) of the given geoms in the pose of ``data`` (see :func:`lowest_of`)."""
+    return lowest_of(model, data.geom_xpos, data.geom_xmat, geoms)
+
+
+def lowest_of(model, geom_xpos: np.ndarray, geom_xmat: np.ndarray, geoms: np.ndarray) -> np.ndarray:
+    """Lowest heights (..., G) of the given geoms from their poses, geom_xpos (..., ngeom, 3) and
+    geom_xmat (..., ngeom, 9), for one frame or many at once: a box reaches down by the sum of its half
     sizes times the |z| of its axes, a capsule by its half length along its axis plus the radius, a
-    sphere by its radius. (Vectorised: the projection asks this for every reference frame.)"""
+    sphere by its radius."""
     import mujoco
 
     size = model.geom_size[geoms]
-    zrow = data.geom_xmat[geoms][:, 6:9]  # third row of each rotation: the z of the geom's axes
+    zrow = geom_xmat[..., geoms, 6:9]  # third row of each rotation: the z of the geom's axes
     kind = model.geom_type[geoms]
     reach = np.where(kind == mujoco.mjtGeom.mjGEOM_BOX, np.abs(zrow * size).sum(-1),
                      np.where(kind == mujoco.mjtGeom.mjGEOM_CAPSULE,
-                              np.abs(zrow[:, 2]) * size[:, 1] + size[:, 0], size[:, 0]))  # fmt: skip
-    return data.geom_xpos[geoms, 2] - reach
+                              np.abs(zrow[..., 2]) * size[:, 1] + size[:, 0], size[:, 0]))  # fmt: skip
+    return geom_xpos[..., geoms, 2] - reach
+
+
+def pose_frames(model, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Forward kinematics of every frame of qpos (N, nq): body positions xpos (N, nbody, 3) and geom
+    poses geom_xpos (N, ngeom, 3), geom_xmat (N, ngeom, 9). One C call per frame; the arithmetic on the
+    poses is then done for all frames at once (the per-frame numpy calls cost more than the kinematics)."""
+    import mujoco
+
+    data = mujoco.MjData(model)
+    n = len(qpos)
+    xpos = np.empty((n, model.nbody, 3))
+    gpos, gmat = np.empty((n, model.ngeom, 3)), np.empty((n, model.ngeom, 9))
+    for k in range(n):
+        data.qpos[:] = qpos[k]
+        mujoco.mj_kinematics(model, data)
+        xpos[k], gpos[k], gmat[k] = data.xpos, data.geom_xpos, data.geom_xmat
+    return xpos, gpos, gmat
 
 
 class HumanoidSurface:
@@ -68,8 +91,6 @@ class HumanoidSurface:
     def _per_frame(self, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(lowest (..., T), feet (..., T, 4)) heights in metres; the metrics ask for both of the same
         array in turn, so the last result is kept."""
-        import mujoco
-
         # Keyed on the array object itself, held here: an id() alone can be reused by the next array
         # once the first is freed, and would then return another motion's heights.
         if self._cache is not None and self._cache[0] is joints:
@@ -83,13 +104,10 @@ class HumanoidSurface:
             offsets = self._body(b, len(flat))
             offsets = body_from_joints(motion) if offsets is None else offsets
             model = build_model(offsets, self.config)
-            data = mujoco.MjData(model)
             patch = np.array([model.geom(JOINT_NAMES[j]).id for j in FOOT_JOINTS])
-            for t, q in enumerate(joints_to_qpos(motion, model, config=self.config)):
-                data.qpos[:] = q
-                mujoco.mj_kinematics(model, data)
-                lowest[b, t] = lowest_point(model, data)
-                feet[b, t] = geoms_lowest(model, data, patch)
+            _, gpos, gmat = pose_frames(model, joints_to_qpos(motion, model, config=self.config))
+            lowest[b] = lowest_of(model, gpos, gmat, np.arange(1, model.ngeom)).min(axis=-1)
+            feet[b] = lowest_of(model, gpos, gmat, patch)
         result = lowest.reshape(x.shape[:-2]), feet.reshape(x.shape[:-2] + (4,))
         self._cache = (joints, result)
         return result

@@ -68,7 +68,7 @@ def test_deterministic_and_batch_equals_one_by_one(walk: np.ndarray) -> None:
     one = project(short)
     again = project(short)
     np.testing.assert_array_equal(one.simulated, again.simulated)
-    batch = project(np.stack([short, short[::-1].copy()]), config=ProjectionConfig(threads=2))
+    batch = project(np.stack([short, short[::-1].copy()]), config=ProjectionConfig(workers=2))
     np.testing.assert_array_equal(batch.simulated[0], one.simulated)
     np.testing.assert_array_equal(batch.mpjpe[0], one.mpjpe)
     np.testing.assert_array_equal(batch.simulated[1], project(short[::-1].copy()).simulated)

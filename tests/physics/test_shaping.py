@@ -127,9 +127,7 @@ def test_a_swing_foot_dipped_into_the_floor_is_lifted_and_the_stance_foot_ground
     """Generated motions often dip the swing foot into the floor; grounding then lifts the whole frame by it
     and the stance foot hangs in the air (the tracker then dragged the swing toe along the floor: Skate).
     Here the real walk's swing feet are pushed 4 cm under the floor in mid-swing."""
-    import mujoco
-
-    from physmotion.physics.shaping import _Geometry, _move_ankle
+    from physmotion.physics.shaping import _Geometry, _move_ankles
 
     model, qpos = walk_qpos
     walk = to_floor(model, qpos, DT, 1.0)
@@ -141,9 +139,11 @@ def test_a_swing_foot_dipped_into_the_floor_is_lifted_and_the_stance_foot_ground
     frames, sides = np.nonzero(swing)
     assert len(frames) >= 8
     dipped = walk.copy()
-    data = mujoco.MjData(model)
-    for k, i in zip(frames, sides):
-        _move_ankle(model, data, dipped[k], geo.legs[i], np.array([0.0, 0.0, -feet[k, i] - 0.04]))
+    for i, leg in enumerate(geo.legs):
+        on = frames[sides == i]
+        moves = np.zeros((len(on), 3))
+        moves[:, 2] = -feet[on, i] - 0.04  # MuJoCo z is up
+        _move_ankles(model, dipped, on, leg, moves)
     config = ShapingConfig()
     fixed = shape_reference(model, dipped, DT, config)
     old = shape_reference(model, dipped, DT, ShapingConfig(stance_by_speed=False))

@@ -1,0 +1,69 @@
+"""Worker processes for batches of motions: each motion's projection runs whole in one process.
+
+The tracker is Python at the simulation rate and holds the GIL, and so do retargeting and reference
+shaping, so threads gain little on a batch; processes use every core. Measured on 2 cores, 16 generated
+6 s motions: 6.0 s on 2 threads (the thread pool this replaced), 3.3 s on 2 processes, with bit-identical
+results (each motion is simulated on its own, whatever process runs it).
+
+The pool is made on first use and kept, so its start-up (about 1 s) is paid once per Python session.
+On Linux it forks, so a user's script needs no ``if __name__ == "__main__"`` guard; elsewhere it uses the
+platform's default start method (spawn), with Python's usual requirement of that guard. The worker
+processes only run numpy, scipy and MuJoCo, never torch, so forking a process that uses torch is safe.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import sys
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from typing import TypeVar
+
+from physmotion.errors import PhysmotionError
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+_pool: ProcessPoolExecutor | None = None
+_pool_size = 0
+
+
+def worker_count(requested: int, jobs: int) -> int:
+    """Processes to use for ``jobs`` items: ``requested`` (0: one per core), never more than the jobs."""
+    return max(1, min(requested or os.cpu_count() or 1, jobs))
+
+
+def map_in_workers(fn: Callable[[T], R], items: Sequence[T], workers: int = 0) -> list[R]:
+    """``[fn(x) for x in items]``, in worker processes when there is more than one item and core.
+
+    ``fn`` must be a module-level function (or a ``functools.partial`` of one) and the items picklable.
+    Results come back in input order; an exception raised by ``fn`` is raised here. A worker that dies
+    (killed, or crashed in C) raises :class:`PhysmotionError`, and the next call starts a fresh pool.
+    """
+    n = worker_count(workers, len(items))
+    if n == 1:
+        return [fn(x) for x in items]
+    try:
+        return list(_get_pool(n).map(fn, items))
+    except BrokenProcessPool:
+        _shutdown()
+        raise PhysmotionError("a worker process died (out of memory, or killed); nothing returned") from None
+
+
+def _get_pool(size: int) -> ProcessPoolExecutor:
+    global _pool, _pool_size
+    if _pool is None or _pool_size != size:
+        _shutdown()
+        method = "fork" if sys.platform.startswith("linux") else None
+        _pool = ProcessPoolExecutor(size, mp_context=multiprocessing.get_context(method))
+        _pool_size = size
+    return _pool
+
+
+def _shutdown() -> None:
+    global _pool, _pool_size
+    if _pool is not None:
+        _pool.shutdown(wait=False, cancel_futures=True)
+    _pool, _pool_size = None, 0

@@ -1,0 +1,39 @@
+"""The worker pool that projects the motions of a batch in parallel processes."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from physmotion.errors import PhysmotionError
+from physmotion.physics.workers import map_in_workers, worker_count
+
+
+def _square_and_pid(x: int) -> tuple[int, int]:
+    return x * x, os.getpid()
+
+
+def _die(x: int) -> int:
+    os._exit(3)  # a worker killed mid-task, as by the out-of-memory killer
+
+
+def test_worker_count_never_exceeds_the_jobs() -> None:
+    assert worker_count(0, 1) == 1
+    assert worker_count(4, 2) == 2
+    assert worker_count(1, 16) == 1
+    assert worker_count(0, 1000) == (os.cpu_count() or 1)
+
+
+def test_results_come_back_in_order_from_other_processes() -> None:
+    out = map_in_workers(_square_and_pid, list(range(12)), workers=2)
+    assert [v for v, _ in out] == [x * x for x in range(12)]
+    assert os.getpid() not in {pid for _, pid in out}
+    # One worker: everything runs here.
+    assert {pid for _, pid in map_in_workers(_square_and_pid, [1, 2], workers=1)} == {os.getpid()}
+
+
+def test_a_dead_worker_is_one_clear_error_and_the_next_call_works() -> None:
+    with pytest.raises(PhysmotionError, match="worker process died"):
+        map_in_workers(_die, [1, 2], workers=2)
+    assert [v for v, _ in map_in_workers(_square_and_pid, [3, 4], workers=2)] == [9, 16]
