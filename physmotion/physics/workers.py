@@ -43,7 +43,7 @@ def map_in_workers(fn: Callable[[T], R], items: Sequence[T], workers: int = 0) -
     (killed, or crashed in C) raises :class:`PhysmotionError`, and the next call starts a fresh pool.
     """
     n = worker_count(workers, len(items))
-    if n == 1:
+    if n == 1 or multiprocessing.current_process().daemon:  # a daemonic process may not have children
         return [fn(x) for x in items]
     try:
         return list(_get_pool(n).map(fn, items))

@@ -37,3 +37,15 @@ def test_a_dead_worker_is_one_clear_error_and_the_next_call_works() -> None:
     with pytest.raises(PhysmotionError, match="worker process died"):
         map_in_workers(_die, [1, 2], workers=2)
     assert [v for v, _ in map_in_workers(_square_and_pid, [3, 4], workers=2)] == [9, 16]
+
+
+def _map_from_a_daemon(x: int) -> list[int]:
+    return [pid for _, pid in map_in_workers(_square_and_pid, [x, x + 1], workers=2)]
+
+
+def test_inside_a_daemonic_worker_everything_runs_in_that_worker() -> None:
+    import multiprocessing
+
+    with multiprocessing.get_context("fork").Pool(1) as pool:  # multiprocessing.Pool's workers are daemons
+        pids = pool.map_async(_map_from_a_daemon, [1]).get(timeout=60)[0]  # without the check: a hang
+    assert len(set(pids)) == 1 and os.getpid() not in pids
