@@ -136,13 +136,13 @@ def _continuous_euler(rot: np.ndarray, seq: str) -> np.ndarray:
     unwrapping) nearest to the previous frame's angles.
     """
     a, b = _euler_branches(rot, seq)
+    both = np.stack([a, b], axis=1)  # (T, 2, N, 3): both branches go through each step together
     out = np.empty_like(a)
     out[0] = _nearest_2pi(a[0], np.zeros_like(a[0]))
     for t in range(1, a.shape[0]):
-        ca = _nearest_2pi(a[t], out[t - 1])
-        cb = _nearest_2pi(b[t], out[t - 1])
-        pick_b = np.sum((cb - out[t - 1]) ** 2, -1) < np.sum((ca - out[t - 1]) ** 2, -1)
-        out[t] = np.where(pick_b[:, None], cb, ca)
+        c = _nearest_2pi(both[t], out[t - 1])
+        dist = np.sum((c - out[t - 1]) ** 2, -1)  # (2, N)
+        out[t] = np.where((dist[1] < dist[0])[:, None], c[1], c[0])
     return out
 
 
