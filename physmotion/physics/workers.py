@@ -7,8 +7,9 @@ results (each motion is simulated on its own, whatever process runs it).
 
 The pool is made on first use and kept, so its start-up (about 1 s) is paid once per Python session.
 On Linux it forks, so a user's script needs no ``if __name__ == "__main__"`` guard; elsewhere it uses the
-platform's default start method (spawn), with Python's usual requirement of that guard. The worker
-processes only run numpy, scipy and MuJoCo, never torch, so forking a process that uses torch is safe.
+platform's default start method (spawn), with Python's usual requirement of that guard. The
+projection's workers run only numpy, scipy and MuJoCo, never torch, so forking a process that has used
+torch is safe for them.
 """
 
 from __future__ import annotations
