@@ -14,8 +14,7 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from physmotion.eval.projection_quality import locomotion_clips, measure_projection
-from physmotion.io.importer import import_clip
+from physmotion.eval.projection_quality import locomotion_clips, measure_clips
 from physmotion.physics.projection import ProjectionConfig
 
 
@@ -26,13 +25,9 @@ def main() -> None:
     args = parser.parse_args()
     clips = locomotion_clips(args.mocap)
     clips = clips[: args.limit] if args.limit else clips
-    cfg = ProjectionConfig()
-    rows = []
     start = time.perf_counter()
-    for info in clips:
-        motion = import_clip(info)
-        m = measure_projection(motion.joints, motion.fps, cfg)
-        rows.append((info, m.result, m.before, m.after))
+    measured = measure_clips(clips, ProjectionConfig())  # one worker process per core
+    rows = [(info, m.result, m.before, m.after) for info, m in zip(clips, measured)]
     seconds = time.perf_counter() - start
 
     ok = [r for r in rows if r[1].success]
@@ -43,7 +38,8 @@ def main() -> None:
     for col in ("measure", "value"):
         table.add_column(col)
     table.add_row("success (no MPJPE > 0.5 m)", f"{len(ok)}/{len(rows)} = {100 * len(ok) / len(rows):.1f} %")
-    table.add_row("MPJPE mean, successful clips (mm)", f"{1000 * np.mean([r[1].mpjpe.mean() for r in ok]):.1f}")
+    table.add_row("MPJPE mean, successful clips (mm)",
+                  f"{1000 * np.mean([r[1].mpjpe.mean() for r in ok]):.1f}")
     table.add_row("MPJPE median over clips, all clips (mm)",
                   f"{1000 * np.median([r[1].mpjpe.mean() for r in rows]):.1f}")
     table.add_row("residual force used, mean / p95 (x W)",

@@ -6,15 +6,17 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
-from physmotion.io.importer import ClipInfo, load_manifest
+from physmotion.io.importer import ClipInfo, import_clip, load_manifest
 from physmotion.metrics import physical_metrics
 from physmotion.physics.humanoid import body_from_joints, foot_lift
 from physmotion.physics.projection import ProjectedMotion, ProjectionConfig, project
 from physmotion.physics.surface import HumanoidSurface
+from physmotion.physics.workers import map_in_workers
 
 LOCOMOTION = re.compile(r"\b(walk|walks|walking|run|runs|running|jog|jogs|jogging)\b")
 """A clip whose first caption matches is a walking/running clip."""
@@ -46,3 +48,16 @@ def measure_projection(
     before = physical_metrics(raised, fps=fps, body=surface)
     after = physical_metrics(result.simulated, fps=fps, body=surface)
     return ClipProjection(result, before, after)
+
+
+def measure_clips(
+    clips: list[ClipInfo], config: ProjectionConfig | None = None, workers: int = 0
+) -> list[ClipProjection]:
+    """:func:`measure_projection` of each clip (imported from the manifest), in input order, the clips
+    spread over ``workers`` processes (0: one per core)."""
+    return map_in_workers(partial(_measure_clip, config=config), clips, workers)
+
+
+def _measure_clip(info: ClipInfo, config: ProjectionConfig | None) -> ClipProjection:
+    motion = import_clip(info)
+    return measure_projection(motion.joints, motion.fps, config)

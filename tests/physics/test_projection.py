@@ -40,18 +40,13 @@ def test_walking_and_running_clips_meet_the_targets(mocap_dir) -> None:
     """The issue's all-clips targets on every 8th walking/running clip (26 of 203; the whole set is
     bench/projection_quality.py: 99.5 % tracked, 48.4 mm, Penetrate 0.75 mm, Skate 14.1 -> 10.1 mm;
     these 26: all tracked, 47 mm, Penetrate 0.75 mm, Skate 14.1 -> 10.2 mm)."""
-    from physmotion.eval.projection_quality import locomotion_clips, measure_projection
-    from physmotion.io.importer import import_clip
+    from physmotion.eval.projection_quality import locomotion_clips, measure_clips
 
     clips = locomotion_clips(mocap_dir)[::8]
-    ok, mpjpe, before, after = [], [], [], []
-    for info in clips:
-        motion = import_clip(info)
-        m = measure_projection(motion.joints, motion.fps)
-        ok.append(bool(m.result.success))
-        mpjpe.append(float(m.result.mpjpe.mean()))
-        before.append(m.before)
-        after.append(m.after)
+    measured = measure_clips(clips)
+    ok = [bool(m.result.success) for m in measured]
+    mpjpe = [float(m.result.mpjpe.mean()) for m in measured]
+    before, after = [m.before for m in measured], [m.after for m in measured]
     mean = lambda rows, key: float(np.mean([r[key] for r in rows]))  # noqa: E731
     print(f"\n{sum(ok)}/{len(ok)} tracked, MPJPE {1000 * np.mean(mpjpe):.1f} mm, penetrate "
           f"{mean(before, 'penetrate'):.2f} -> {mean(after, 'penetrate'):.2f}, skate "
