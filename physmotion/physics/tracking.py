@@ -173,8 +173,13 @@ def prepare_reference(model, qpos: np.ndarray, dt: float, config: TrackingConfig
     joints = np.zeros((n, len(JOINT_NAMES), 3))
     tau = np.zeros((n, model.nv))
     corners = _foot_box_corners(model)
+    geoms = np.array([g for g, _, _ in corners])
+    bodies = [body for _, body, _ in corners]
+    local = np.stack([c for _, _, c in corners])  # (4 boxes, 4 corners, 3)
     pyr = _pyramid(cfg.friction)
-    jacp = np.zeros((3, model.nv))
+    jac = np.zeros((local.shape[0] * local.shape[1], 3, model.nv))  # at most every corner touches
+    reg = 1e-3  # prefer small forces among the many that explain the wrench
+    regs = {m: reg * np.eye(m) for m in range(4, 4 * len(jac) + 1, 4)}
     saved_flags = inv.opt.disableflags
     try:
         off = mujoco.mjtDisableBit
@@ -186,20 +191,19 @@ def prepare_reference(model, qpos: np.ndarray, dt: float, config: TrackingConfig
             if not cfg.feedforward:
                 continue
             t = data.qfrc_inverse.copy()
-            jac_list = []
-            for g, body, local in corners:
-                pts = data.geom_xpos[g] + local @ data.geom_xmat[g].reshape(3, 3).T
-                for p in pts[pts[:, 2] < cfg.contact_height]:
-                    mujoco.mj_jac(inv, data, jacp, None, p, body)
-                    jac_list.append(jacp.copy())
-            if jac_list:
+            rot = data.geom_xmat[geoms].reshape(-1, 3, 3)
+            pts = data.geom_xpos[geoms][:, None] + local @ rot.transpose(0, 2, 1)  # (4, 4, 3) world corners
+            low = pts[..., 2] < cfg.contact_height  # (4, 4) corners that can push
+            count = 0
+            for b, c in zip(*np.nonzero(low)):
+                mujoco.mj_jac(inv, data, jac[count], None, pts[b, c], bodies[b])
+                count += 1
+            if count:
                 # Columns: root rows of J^T d for each pyramid edge d of each contact point.
-                jt = np.stack(jac_list)  # (P, 3, nv)
-                gen = np.einsum("pcv,ec->pev", jt, pyr).reshape(-1, model.nv)  # (P*4, nv)
+                gen = np.einsum("pcv,ec->pev", jac[:count], pyr).reshape(-1, model.nv)  # (P*4, nv)
                 a = gen[:, :6].T  # (6, P*4)
-                reg = 1e-3  # prefer small forces among the many that explain the wrench
                 target = np.concatenate([t[:6], np.zeros(a.shape[1])])
-                c, _ = nnls(np.vstack([a, reg * np.eye(a.shape[1])]), target)
+                c, _ = nnls(np.vstack([a, regs[a.shape[1]]]), target)
                 t = t - c @ gen
             tau[k] = t
     finally:
