@@ -127,7 +127,7 @@ def simulate(
         # Contacts with the floor (geom 0) by the foot bodies; the other geom of a floor pair is the body's.
         pairs = data.contact.geom[: data.ncon]
         on_floor = model.geom_bodyid[pairs[(pairs == 0).any(axis=1)].max(axis=1)]
-        contacts[k] = np.isin(foot_bodies, on_floor)
+        contacts[k] = (foot_bodies[:, None] == on_floor[None, :]).any(axis=1)  # np.isin: 5x slower here
         if mpjpe[k] > fail_mpjpe and reset_on_fail:
             failed_at = k if failed_at is None else failed_at
             resets += 1
