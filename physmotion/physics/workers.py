@@ -17,6 +17,7 @@ from __future__ import annotations
 import multiprocessing
 import os
 import sys
+import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -29,6 +30,7 @@ R = TypeVar("R")
 
 _pool: ProcessPoolExecutor | None = None
 _pool_size = 0
+_lock = threading.Lock()  # callers on several threads share one pool
 
 
 def worker_count(requested: int, jobs: int) -> int:
@@ -55,15 +57,21 @@ def map_in_workers(fn: Callable[[T], R], items: Sequence[T], workers: int = 0) -
 
 def _get_pool(size: int) -> ProcessPoolExecutor:
     global _pool, _pool_size
-    if _pool is None or _pool_size != size:
-        _shutdown()
-        method = "fork" if sys.platform.startswith("linux") else None
-        _pool = ProcessPoolExecutor(size, mp_context=multiprocessing.get_context(method))
-        _pool_size = size
-    return _pool
+    with _lock:
+        if _pool is None or _pool_size != size:
+            _shutdown_locked()
+            method = "fork" if sys.platform.startswith("linux") else None
+            _pool = ProcessPoolExecutor(size, mp_context=multiprocessing.get_context(method))
+            _pool_size = size
+        return _pool
 
 
 def _shutdown() -> None:
+    with _lock:
+        _shutdown_locked()
+
+
+def _shutdown_locked() -> None:
     global _pool, _pool_size
     if _pool is not None:
         _pool.shutdown(wait=False, cancel_futures=True)

@@ -49,3 +49,12 @@ def test_inside_a_daemonic_worker_everything_runs_in_that_worker() -> None:
     with multiprocessing.get_context("fork").Pool(1) as pool:  # multiprocessing.Pool's workers are daemons
         pids = pool.map_async(_map_from_a_daemon, [1]).get(timeout=60)[0]  # without the check: a hang
     assert len(set(pids)) == 1 and os.getpid() not in pids
+
+
+def test_callers_on_several_threads_share_the_pool() -> None:
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(4) as threads:
+        results = list(threads.map(lambda k: map_in_workers(_square_and_pid, [k, k + 1, k + 2], 2), range(8)))
+    assert [[v for v, _ in r] for r in results] == [[k * k, (k + 1) ** 2, (k + 2) ** 2] for k in range(8)]
+    assert len({pid for r in results for _, pid in r}) <= 2  # one pool of two workers served them all
