@@ -207,17 +207,17 @@ def project(
 
 def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig) -> dict[str, np.ndarray]:
     """P of one motion x (T, 22, 3) float64: the fields of :class:`ProjectedMotion` for it."""
-    cfg = config
-    ctrl_fps = 1.0 / cfg.humanoid.control_dt  # the reference and the simulation run at the control rate
+    ctrl_fps = 1.0 / config.humanoid.control_dt  # the reference and the simulation run at the control rate
     body = body_from_joints(x, fps)
-    model = build_model(body, cfg.humanoid)
-    lift = foot_lift(body, cfg.humanoid)
-    qpos = resample_qpos(joints_to_qpos(x, model, lift=lift, config=cfg.humanoid), fps, ctrl_fps)
-    qpos = shape_reference(model, qpos, cfg.humanoid.control_dt, cfg.shaping)
-    ref = prepare_reference(model, qpos, cfg.humanoid.control_dt, cfg.tracking)
-    roll = simulate(model, ref, ModelBasedTracker(model, cfg.tracking), cfg.humanoid, fail_mpjpe=cfg.tau,
-                    reset_on_fail=cfg.reset_on_fail, follow_drift=cfg.follow_drift)
-    out = _back_to_input_rate(roll, model, lift, x, fps, ctrl_fps, cfg.tau, cfg.reset_on_fail)
+    model = build_model(body, config.humanoid)
+    lift = foot_lift(body, config.humanoid)
+    qpos = resample_qpos(joints_to_qpos(x, model, lift=lift, config=config.humanoid), fps, ctrl_fps)
+    qpos = shape_reference(model, qpos, config.humanoid.control_dt, config.shaping)
+    ref = prepare_reference(model, qpos, config.humanoid.control_dt, config.tracking)
+    tracker = ModelBasedTracker(model, config.tracking)
+    roll = simulate(model, ref, tracker, config.humanoid, fail_mpjpe=config.tau,
+                    reset_on_fail=config.reset_on_fail, follow_drift=config.follow_drift)
+    out = _back_to_input_rate(roll, model, lift, x, fps, ctrl_fps, config.tau, config.reset_on_fail)
     return out | {"body": body}
 
 

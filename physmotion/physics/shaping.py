@@ -45,7 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from physmotion.physics.humanoid import layout
-from physmotion.physics.surface import lowest_of, pose_frames
+from physmotion.physics.surface import body_lowest, lowest_of, pose_frames
 from physmotion.skeleton import JOINT_INDEX
 
 _IK_STEPS = 4  # most Gauss-Newton steps of swing_clearance's leg IK
@@ -135,7 +135,7 @@ class _Geometry:
         lay = layout(model)
         self.legs = [_Leg(model, lay, side) for side in ("left", "right")]
         xpos, gpos, gmat = pose_frames(model, qpos)
-        self.lowest = lowest_of(model, gpos, gmat, np.arange(1, model.ngeom)).min(axis=-1)  # floor excluded
+        self.lowest = body_lowest(model, gpos, gmat)
         feet = [lowest_of(model, gpos, gmat, leg.geoms).min(axis=-1) for leg in self.legs]
         self.feet = np.stack(feet, axis=-1)
         self.ankles = xpos[:, [leg.ankle for leg in self.legs], :2]
@@ -182,23 +182,24 @@ def _move_ankles(model, qpos: np.ndarray, frames: np.ndarray, leg: _Leg, moves: 
     f = len(frames)
     pos, quat, rot, jac = np.zeros((f, 3)), np.zeros((f, 4)), np.zeros((f, 3, 3)), np.zeros((f, 6, 9))
 
-    def pose(which: np.ndarray, with_jacobian: bool) -> None:
+    def pose(which: np.ndarray) -> None:
+        """Ankle pose and Jacobian (world frame) of the frames ``which`` in their current ``q``."""
         for m in which:
             data.qpos[:] = q[m]
             mujoco.mj_kinematics(model, data)
             pos[m], quat[m] = data.xpos[leg.ankle], data.xquat[leg.ankle]
             rot[m] = data.xmat[leg.ankle].reshape(3, 3)
-            if with_jacobian:
-                mujoco.mj_comPos(model, data)  # the Jacobian needs the com-based frames
-                mujoco.mj_jacBody(model, data, jacp, jacr, leg.ankle)
-                jac[m, :3], jac[m, 3:] = jacp[:, leg.dofs], jacr[:, leg.dofs]  # world frame
+            mujoco.mj_comPos(model, data)  # the Jacobian needs the com-based frames
+            mujoco.mj_jacBody(model, data, jacp, jacr, leg.ankle)
+            jac[m, :3], jac[m, 3:] = jacp[:, leg.dofs], jacr[:, leg.dofs]
 
-    pose(np.arange(f), False)
-    goal_pos, goal_quat = pos + moves, quat.copy()
     active = np.arange(f)
+    pose(active)
+    goal_pos, goal_quat = pos + moves, quat.copy()
     err = np.zeros((f, 6))
-    for _ in range(_IK_STEPS):
-        pose(active, True)
+    for step in range(_IK_STEPS):
+        if step:
+            pose(active)  # the frames still moving, after the last step
         err[active, :3] = goal_pos[active] - pos[active]
         for m in active:
             mujoco.mju_subQuat(err[m, 3:], goal_quat[m], quat[m])  # local rotation vector
@@ -233,7 +234,7 @@ def _lower_onto_stance(model, qpos: np.ndarray, frames: np.ndarray, before: np.n
 def _lowest(model, qpos: np.ndarray) -> np.ndarray:
     """(N,) height of the lowest geom point (floor excluded) of each frame of qpos (N, 70)."""
     _, gpos, gmat = pose_frames(model, qpos)
-    return lowest_of(model, gpos, gmat, np.arange(1, model.ngeom)).min(axis=-1)
+    return body_lowest(model, gpos, gmat)
 
 
 class _Leg:

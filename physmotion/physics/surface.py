@@ -21,7 +21,13 @@ from physmotion.skeleton import FOOT_JOINTS, JOINT_NAMES, NUM_JOINTS
 
 def lowest_point(model, data) -> float:
     """Height (m, MuJoCo z) of the lowest point of the body (every geom but the floor, geom 0)."""
-    return float(geoms_lowest(model, data, np.arange(1, model.ngeom)).min())
+    return float(body_lowest(model, data.geom_xpos, data.geom_xmat))
+
+
+def body_lowest(model, geom_xpos: np.ndarray, geom_xmat: np.ndarray) -> np.ndarray:
+    """Height (...) of the body's lowest point (every geom but the floor, geom 0) from the geom poses
+    geom_xpos (..., ngeom, 3) and geom_xmat (..., ngeom, 9): one frame or many (see :func:`lowest_of`)."""
+    return lowest_of(model, geom_xpos, geom_xmat, np.arange(1, model.ngeom)).min(axis=-1)
 
 
 def geoms_lowest(model, data, geoms: np.ndarray) -> np.ndarray:
@@ -106,7 +112,7 @@ class HumanoidSurface:
             model = build_model(offsets, self.config)
             patch = np.array([model.geom(JOINT_NAMES[j]).id for j in FOOT_JOINTS])
             _, gpos, gmat = pose_frames(model, joints_to_qpos(motion, model, config=self.config))
-            lowest[b] = lowest_of(model, gpos, gmat, np.arange(1, model.ngeom)).min(axis=-1)
+            lowest[b] = body_lowest(model, gpos, gmat)
             feet[b] = lowest_of(model, gpos, gmat, patch)
         result = lowest.reshape(x.shape[:-2]), feet.reshape(x.shape[:-2] + (4,))
         self._cache = (joints, result)

@@ -137,19 +137,17 @@ class Controller(Protocol):
         ...
 
 
-def _foot_box_corners(model) -> list[tuple[int, int, np.ndarray]]:
-    """(geom id, body id, (4, 3) local bottom-corner offsets) of every box on the feet."""
+def _foot_box_corners(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every box on the feet: geom ids (G,), body ids (G,) and local bottom-corner offsets (G, 4, 3)."""
     import mujoco
 
     body = mujoco.mjtObj.mjOBJ_BODY
     feet = {mujoco.mj_name2id(model, body, n) for n in JOINT_NAMES if "ankle" in n or "foot" in n}
-    out = []
-    for g in range(model.ngeom):
-        if model.geom_bodyid[g] in feet and model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX:
-            sx, sy, sz = model.geom_size[g]
-            local = np.array([[x, y, -sz] for x in (-sx, sx) for y in (-sy, sy)])
-            out.append((g, int(model.geom_bodyid[g]), local))
-    return out
+    geoms = [g for g in range(model.ngeom)
+             if model.geom_bodyid[g] in feet and model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX]  # fmt: skip
+    local = [[[x, y, -sz] for x in (-sx, sx) for y in (-sy, sy)] for sx, sy, sz in model.geom_size[geoms]]
+    local = np.array(local, dtype=np.float64).reshape(-1, 4, 3)
+    return np.array(geoms, dtype=int), model.geom_bodyid[geoms].astype(int), local
 
 
 def _pyramid(mu: float) -> np.ndarray:
@@ -172,10 +170,7 @@ def prepare_reference(model, qpos: np.ndarray, dt: float, config: TrackingConfig
     n = len(qpos)
     joints = np.zeros((n, len(JOINT_NAMES), 3))
     tau = np.zeros((n, model.nv))
-    corners = _foot_box_corners(model)
-    geoms = np.array([g for g, _, _ in corners])
-    bodies = [body for _, body, _ in corners]
-    local = np.stack([c for _, _, c in corners])  # (4 boxes, 4 corners, 3)
+    geoms, bodies, local = _foot_box_corners(model)  # local: (boxes, 4 corners, 3)
     pyr = _pyramid(cfg.friction)
     jac = np.zeros((local.shape[0] * local.shape[1], 3, model.nv))  # at most every corner touches
     reg = 1e-3  # prefer small forces among the many that explain the wrench
@@ -195,8 +190,8 @@ def prepare_reference(model, qpos: np.ndarray, dt: float, config: TrackingConfig
             pts = data.geom_xpos[geoms][:, None] + local @ rot.transpose(0, 2, 1)  # (4, 4, 3) world corners
             low = pts[..., 2] < cfg.contact_height  # (4, 4) corners that can push
             count = 0
-            for b, c in zip(*np.nonzero(low)):
-                mujoco.mj_jac(inv, data, jac[count], None, pts[b, c], bodies[b])
+            for box, corner in zip(*np.nonzero(low)):
+                mujoco.mj_jac(inv, data, jac[count], None, pts[box, corner], int(bodies[box]))
                 count += 1
             if count:
                 # Columns: root rows of J^T d for each pyramid edge d of each contact point.
