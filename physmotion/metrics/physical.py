@@ -387,6 +387,14 @@ def skate(joints: np.ndarray, fps: float = FPS, *, lengths: Lengths = None, mask
     the same 5 mm margin on the lowest joint, UHC the mesh vertices at or below the floor. The
     displacement is expressed per frame at ``params.reference_fps`` (20 fps, HumanML3D), so a foot
     sliding at 0.3 m/s scores 15 mm at any input rate. Frame pairs of all motions pooled.
+
+    This follows PhysDiff's text (App. A: "foot joints that contact the ground ... their average
+    horizontal displacement"). CLoSD's code counts, per frame pair, only the joint lowest by its joint
+    height, in the data convention (floor at the motion's lowest joint). On 32 generated motions
+    (2026-11-24) that reads 1.9 mm unprojected and 0.7 mm after PhysDiff, the scale of PhysDiff's
+    published Skate (MDM 1.41, PhysDiff 0.51 mm), against 24.8 / 8.0 mm here: a joint height within
+    5 mm of the motion's lowest finds contact in few frames. The lowest foot joint by contact patch
+    instead reads 29.0 / 7.7 mm; not kept as a metric.
     """
     return _one("skate", joints, fps, lengths, mask, body, params)
 
