@@ -44,11 +44,12 @@ def _default_humanoid() -> HumanoidConfig:
 
     Ankle gains, re-measured with everything else as below (2026-11-24). kp 5000 / 3000 / 2000 / 1500 /
     1200 / 1000 (kv = kp / 10): 96 generated motions projected once, Phys-Err 13.95 / 12.82 / 11.19 /
-    10.43 / 10.33 / 10.33 mm (Skate 7.7 -> 6.1 mm at 1500, and the runs' Float 23.5 -> 19.2 mm), MPJPE 72
-    / 80 / 83 / 82 / 84 / 84 mm. The 203 captured walks/runs (bench/projection_quality.py): kp 5000 /
-    1500 / 1000 tracked 99.5 / 97 / 95 % at 48.6 / 33.7 / 30.4 mm, Phys-Err 16.5 / 10.1 / 8.5 mm. kp 1500
-    keeps a margin on the 95 %. The earlier choice of 5000 (below) predates reference shaping and the
-    root residual's bounds. 240 Hz with kp 1500 still fails (17.2 mm on the 96 motions).
+    10.43 / 10.33 / 10.33 mm (Skate 7.7 -> 6.1 mm at 1500, and the runs' Float 23.5 -> 19.2 mm), MPJPE
+    72 / 80 / 83 / 82 / 84 / 84 mm. The 203 captured walks/runs (bench/projection_quality.py): kp 5000
+    / 2000 / 1500 / 1000 tracked 99.5 / 99 / 97 / 95 % at 48.6 / 36.1 / 33.7 / 30.4 mm, Phys-Err 16.5
+    / 11.0 / 10.1 / 8.5 mm. kp 1500 keeps a margin on the 95 %; kv 300 with it did worse (98 %, 45 mm,
+    13.4 mm). The earlier choice of 5000 (below) predates reference shaping and the root residual's
+    bounds. 240 Hz with kp 1500 still fails (17.2 mm on the 96 motions).
 
     Measured over all 203 walking/running clips of the bundled mocap (bench/projection_quality.py, with a
     grounded reference, before swing clearance): at 240 Hz with ankle kp 2000, 85 % tracked at 67 mm;
