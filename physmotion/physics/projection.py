@@ -90,18 +90,18 @@ def _default_tracking() -> TrackingConfig:
     # so the residual cannot hold a floating body up (at 1 W the simulated walks floated more than their
     # input). Torque 1 W x 1 m: at 0.5 the backward and tired walks tipped over once the torque
     # saturated (5 of 6 such failures tracked at 1.0).
-    # Not kept (96 generated motions projected once: 13.95 mm with these): the downward residual capped
-    # at 0.1 / 0 W, 14.20 / 14.58 mm (runners float more without the pull); a vertical centre-of-mass PD
-    # through the stance legs' Jacobians (virtual model control, 400 / s^2, 40 / s, at the control rate;
-    # at 90 Hz on 32 motions the runs' Float stayed at 19-21 mm), 13.75 mm with MPJPE 72 -> 67 mm; PD
-    # targets one control step further ahead (against the tracker's lag), 14.12 mm; on 32 of them
-    # (14.2 mm with these), upward residual 0.2 / 0.3 W, 13.9 / 13.5 mm, root kd 3000, 13.2 mm, elliptic
-    # friction cones with impratio 10, 13.6 mm, and planting a foot that touches the floor while its
-    # reference moves slower than 0.5 / 0.8 m/s (leg IK at the control rate), 14.5 / 14.8 mm: none
-    # lowered Phys-Err beyond the noise. Re-measured on the 96 (2026-11-24): force bound 0.5 / 0.2 W,
-    # 14.24 / 14.19 mm (MPJPE 48 / 108 mm). The feed-forward's contact split solved at run time over the
-    # foot corners near the floor in the simulation (or in either), so stance torques follow the body's
-    # own contacts rather than the reference's timing: 14.67 / 14.35 mm (the runs' Float unchanged).
+    # Not kept (96 generated motions projected once: 13.95 mm with these, ankle kp 5000): the downward
+    # residual capped at 0.1 / 0 W, 14.20 / 14.58 mm (runners float more without the pull); a vertical
+    # centre-of-mass PD through the stance legs' Jacobians (virtual model control, 400 / s^2, 40 / s, at the
+    # control rate; at 90 Hz on 32 motions the runs' Float stayed at 19-21 mm), 13.75 mm with MPJPE 72 -> 67
+    # mm; PD targets one control step further ahead (against the tracker's lag), 14.12 mm; on 32 of them (14.2
+    # mm with these), upward residual 0.2 / 0.3 W, 13.9 / 13.5 mm, root kd 3000, 13.2 mm, elliptic friction
+    # cones with impratio 10, 13.6 mm, and planting a foot that touches the floor while its reference moves
+    # slower than 0.5 / 0.8 m/s (leg IK at the control rate), 14.5 / 14.8 mm: none lowered Phys-Err beyond the
+    # noise. Re-measured on the 96 (2026-11-24): force bound 0.5 / 0.2 W, 14.24 / 14.19 mm (MPJPE 48 / 108
+    # mm). The feed-forward's contact split solved at run time over the foot corners near the floor in the
+    # simulation (or in either), so stance torques follow the body's own contacts rather than the reference's
+    # timing: 14.67 / 14.35 mm (the runs' Float unchanged).
     return TrackingConfig(residual_force=0.3, residual_torque=1.0, residual_lift=0.1,
                           root_kp=10000.0, root_kd=1000.0, root_rot_kp=3000.0, root_rot_kd=30.0)
 

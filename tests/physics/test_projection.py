@@ -38,8 +38,8 @@ def test_tracks_a_real_walk(walk: np.ndarray) -> None:
 @pytest.mark.slow
 def test_walking_and_running_clips_meet_the_targets(mocap_dir) -> None:
     """The issue's all-clips targets on every 8th walking/running clip (26 of 203; the whole set is
-    bench/projection_quality.py: 99.5 % tracked, 48.6 mm, Penetrate 0.72 mm, Skate 14.1 -> 10.1 mm;
-    these 26: all tracked, 46.6 mm, Penetrate 0.71 mm, Skate 14.1 -> 10.7 mm)."""
+    bench/projection_quality.py: 97 % tracked, 33.7 mm, Penetrate 0.20 mm, Skate 14.4 -> 5.4 mm;
+    these 26: all tracked, 36.0 mm, Penetrate 0.25 mm, Skate 14.1 -> 5.3 mm)."""
     from physmotion.eval.projection_quality import locomotion_clips, measure_clips
 
     clips = locomotion_clips(mocap_dir)[::8]
