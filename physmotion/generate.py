@@ -25,6 +25,7 @@ from physmotion.diffusion.physdiff import (
     ProjectionLog,
     on_data_floor,
     parse_schedule,
+    sampling_projection,
 )
 from physmotion.diffusion.samplers import SamplerConfig, sample
 from physmotion.errors import PhysmotionError
@@ -47,11 +48,7 @@ class GenerateConfig:
     post_projections: int = 1
     sampler: SamplerConfig = field(default_factory=SamplerConfig)
     seed: int = 0
-    # P for both physdiff and post: the humanoid is put back on the motion where its error passes 0.2 m
-    # (or the motion is moved to it where it has only drifted, ProjectionConfig.follow_drift), so P
-    # always returns a simulated motion (reset_on_fail). Measured on 32 prompts (bench/physdiff_quality.py,
-    # model at step 3229): PhysDiff's Phys-Err -75 / -76 / -72 / -68 % at 0.15 / 0.2 / 0.3 / 0.5 m.
-    projection: ProjectionConfig = field(default_factory=lambda: ProjectionConfig(reset_on_fail=True, tau=0.2))
+    projection: ProjectionConfig = field(default_factory=sampling_projection)  # P for physdiff and post
 
 
 @dataclass

@@ -16,7 +16,7 @@ The real row uses HumanML3D's evaluation crops of the real motions (lengths roun
 4, one unit shorter a third of the time, random start), so its FID is close to, not exactly, zero.
 
 Physical metrics use the humanoid's collision geometry (:class:`HumanoidSurface`) by default. ``ifr`` is
-the fraction of motions whose last projection had to reset the humanoid (it fell, MPJPE > 0.2 m): Morph's
+the fraction of motions whose last projection had to reset the humanoid (it fell, MPJPE > tau, 0.15 m by default): Morph's
 imitation failure rate at our sampling threshold.
 """
 
@@ -190,7 +190,9 @@ def evaluate(
     meta = {"split": cfg.split, "motions": len(items), "repeats": cfg.repeats, "modes": list(cfg.modes),
             "model": model.info.get("data", ""), "model_steps": model.info.get("steps"),
             "model_licence": model.licence_tag, "evaluator_licence": evaluator.licence_tag,
-            "sampler": asdict(cfg.base.sampler), "surface": cfg.surface, "seed": cfg.seed,
+            "sampler": asdict(cfg.base.sampler),
+            "projection": {"reset_on_fail": cfg.base.projection.reset_on_fail, "tau": cfg.base.projection.tau},
+            "surface": cfg.surface, "seed": cfg.seed,
             "data": str(data)}  # fmt: skip
     return EvalTable(rows=rows, meta=meta)
 
