@@ -37,12 +37,13 @@ def sampling_projection() -> ProjectionConfig:
     Measured on the 32 bench prompts (bench/physdiff_quality.py), PhysDiff's Phys-Err against none:
     - model at step 3229, ankle kp 5000: -75 / -76 / -72 / -68 % at tau 0.15 / 0.2 / 0.3 / 0.5 m;
     - step 7904, ankle kp 1500 (2026-11-24), seeds 0 / 1 / 2: -79.3 / -80.8 / -80.5 % at 0.2 m, -80.9 /
-      -82.4 / -81.6 % at 0.15 m. The runs gain (projected once, 96 motions: their Phys-Err 30.5 -> 28.7
-      mm, Float 19.2 -> 17.6) because a runner that bounces above its reference is put back sooner; the
-      cost is more resets (per run 0.44 -> 1.06 in 6 s, per other motion 0.13 -> 0.18; PhysDiff's
-      projections without a fall 87 / 84 / 95 -> 81 / 83 / 87 %). On the test split (58 motions, its own
-      captions) the two are equal: 8.01 / 7.95 mm, IFR 0.155 / 0.172, jerk 172 / 160 m/s^3.
-      0.125 / 0.1 m, projected once: 9.47 / 9.52 mm against 10.05 at 0.15, with 2.1 resets per run.
+      -82.4 / -81.6 % at 0.15 m. Projecting those 96 motions' plain samples once: 10.43 -> 10.05 mm;
+      the runs gain (30.5 -> 28.7 mm, Float 19.2 -> 17.6) because a runner that bounces above its
+      reference is put back sooner. The cost is more resets, each a jump in the output (per run 0.44 ->
+      1.06 in 6 s, per other motion 0.13 -> 0.18; PhysDiff's projections without a fall 87 / 84 / 95 ->
+      81 / 83 / 87 %). On the test split (58 motions, their own captions) the two are equal: 8.01 / 7.95
+      mm, IFR 0.155 / 0.172, jerk 172 / 160 m/s^3.
+    - Not taken: 0.125 / 0.1 m (projected once: 9.47 / 9.52 mm) put a run back 2.1 times in 6 s at 0.125.
     """
     return ProjectionConfig(reset_on_fail=True, tau=0.15)
 

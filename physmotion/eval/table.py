@@ -16,8 +16,8 @@ The real row uses HumanML3D's evaluation crops of the real motions (lengths roun
 4, one unit shorter a third of the time, random start), so its FID is close to, not exactly, zero.
 
 Physical metrics use the humanoid's collision geometry (:class:`HumanoidSurface`) by default. ``ifr`` is
-the fraction of motions whose last projection had to reset the humanoid (it fell, MPJPE > tau, 0.15 m by default): Morph's
-imitation failure rate at our sampling threshold.
+the fraction of motions whose last projection had to reset the humanoid (it fell: MPJPE above tau, 0.15 m
+by default): Morph's imitation failure rate at our sampling threshold.
 """
 
 from __future__ import annotations
@@ -191,7 +191,7 @@ def evaluate(
             "model": model.info.get("data", ""), "model_steps": model.info.get("steps"),
             "model_licence": model.licence_tag, "evaluator_licence": evaluator.licence_tag,
             "sampler": asdict(cfg.base.sampler),
-            "projection": {"reset_on_fail": cfg.base.projection.reset_on_fail, "tau": cfg.base.projection.tau},
+            "projection": {"reset_on_fail": (p := cfg.base.projection).reset_on_fail, "tau": p.tau},
             "surface": cfg.surface, "seed": cfg.seed,
             "data": str(data)}  # fmt: skip
     return EvalTable(rows=rows, meta=meta)
