@@ -47,7 +47,7 @@ def main() -> None:
         no_fall = "-" if mode == "none" else f"{100 * mean['tracked']:.0f}%"
         table.add_row(mode, *(f"{mean[k]:.2f}" for k in COLUMNS), change, per_seed, no_fall,
                       f"{mean['seconds_per_motion']:.2f}")
-    Console().print(table)
+    Console(width=160).print(table)
 
 
 if __name__ == "__main__":
