@@ -4,7 +4,8 @@ Usage: python bench/physdiff_quality.py [--model DIR] [--prompts 32] [--seeds 0,
 Rows: none, post:1, post:4 (as many projections as PhysDiff's default), physdiff:end:4,space:1.
 Metrics on the humanoid's MuJoCo geometry posed on the joints, with the body P simulated for projected outputs
 (PhysDiff's Penetrate/Float/Skate/Phys-Err, mm), averaged over the seeds; "vs none" is also given per seed,
-because one seed's 32 motions move the ratio by about a point (-79.3 / -80.8 / -80.5 % on 2026-11-24).
+because one seed's 32 motions move the ratio by about a point (PhysDiff on 2026-11-24: -80.9 / -82.4 /
+-81.6 % for seeds 0 / 1 / 2).
 """
 
 from __future__ import annotations

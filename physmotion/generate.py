@@ -25,6 +25,7 @@ from physmotion.diffusion.physdiff import (
     ProjectionLog,
     on_data_floor,
     parse_schedule,
+    reset_settings,
     sampling_projection,
 )
 from physmotion.diffusion.samplers import SamplerConfig, sample
@@ -165,7 +166,7 @@ def write_outputs(result: GenerateResult, out: str | Path, config: GenerateConfi
             written.append(base.with_suffix(".gif"))
     log = result.projections
     settings = asdict(config)
-    settings["projection"] = {"reset_on_fail": config.projection.reset_on_fail, "tau": config.projection.tau}
+    settings["projection"] = reset_settings(config.projection)
     summary = {
         "config": settings,
         "files": [p.name for p in written],

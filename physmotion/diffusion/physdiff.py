@@ -49,6 +49,11 @@ def sampling_projection() -> ProjectionConfig:
     return ProjectionConfig(reset_on_fail=True, tau=0.15)
 
 
+def reset_settings(config: ProjectionConfig) -> dict[str, bool | float]:
+    """How P treats a fall, as recorded with generated files and evaluation tables."""
+    return {"reset_on_fail": config.reset_on_fail, "tau": config.tau}
+
+
 def parse_schedule(spec: str, steps: int) -> list[int]:
     """Loop indices (0 = first sampling step) at which to project, ascending, for a schedule string."""
     try:

@@ -33,7 +33,7 @@ import numpy as np
 from physmotion.conventions import FPS
 from physmotion.data.dataset import MotionItem, load_items
 from physmotion.diffusion.model import MotionDiffusion
-from physmotion.diffusion.physdiff import joints_to_features, on_data_floor, parse_schedule
+from physmotion.diffusion.physdiff import joints_to_features, on_data_floor, parse_schedule, reset_settings
 from physmotion.errors import PhysmotionError
 from physmotion.eval.evaluator import Evaluator
 from physmotion.eval.physics_modes import metric_surface, parse_mode
@@ -191,7 +191,7 @@ def evaluate(
             "model": model.info.get("data", ""), "model_steps": model.info.get("steps"),
             "model_licence": model.licence_tag, "evaluator_licence": evaluator.licence_tag,
             "sampler": asdict(cfg.base.sampler),
-            "projection": {"reset_on_fail": (p := cfg.base.projection).reset_on_fail, "tau": p.tau},
+            "projection": reset_settings(cfg.base.projection),
             "surface": cfg.surface, "seed": cfg.seed,
             "data": str(data)}  # fmt: skip
     return EvalTable(rows=rows, meta=meta)
