@@ -102,6 +102,13 @@ class RootTargets:
     omega: np.ndarray
     ff_force: np.ndarray
     ff_torque: np.ndarray
+    # Per step, the 15 floats pos, vel, ff_force, omega, ff_torque as a Python list: the residual runs at
+    # the simulation rate, and indexing small numpy arrays there cost more than the arithmetic.
+    rows: list[list[float]] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        rows = np.concatenate([self.pos, self.vel, self.ff_force, self.omega, self.ff_torque], axis=1).tolist()
+        object.__setattr__(self, "rows", rows)
 
 
 def _root_targets(ref: Reference, substeps: int) -> RootTargets:
@@ -255,18 +262,26 @@ class ModelBasedTracker:
         cfg = self.config
         tgt = ref.root_targets(substeps)
         i = min(step, len(tgt.pos) - 1)
-        rot = data.xmat[1].reshape(3, 3)  # pelvis orientation (body 1 is the root)
-        force = (tgt.ff_force[i] + cfg.root_kp * (tgt.pos[i] - data.qpos[:3])
-                 + cfg.root_kd * (tgt.vel[i] - data.qvel[:3]))  # fmt: skip
+        px, py, pz, vx, vy, vz, fx, fy, fz, ox, oy, oz, tx, ty, tz = tgt.rows[i]
+        q, v, r = data.qpos[:3].tolist(), data.qvel[:6].tolist(), data.xmat[1].tolist()  # r: pelvis, row-major
+        # Plain floats, each term in the order the numpy expression (ff + kp * dx) + kd * dv would take,
+        # so the result is bit-identical to it at a fraction of the cost.
+        kp, kd = cfg.root_kp, cfg.root_kd
+        force = [fx + kp * (px - q[0]) + kd * (vx - v[0]),
+                 fy + kp * (py - q[1]) + kd * (vy - v[1]),
+                 fz + kp * (pz - q[2]) + kd * (vz - v[2])]  # fmt: skip
         err = np.zeros(3)
         mujoco.mju_subQuat(err, tgt.quat[i], data.qpos[3:7])  # pelvis -> target, as a local rotation vector
-        omega_err = tgt.omega[i] @ rot - data.qvel[3:6]  # local frame: R^T omega_ref - omega
-        torque = tgt.ff_torque[i] + cfg.root_rot_kp * err + cfg.root_rot_kd * omega_err
+        e = err.tolist()
+        # Local frame: R^T omega_ref - omega.
+        w = [ox * r[j] + oy * r[3 + j] + oz * r[6 + j] - v[3 + j] for j in range(3)]
+        rkp, rkd = cfg.root_rot_kp, cfg.root_rot_kd
+        torque = [tx + rkp * e[0] + rkd * w[0], ty + rkp * e[1] + rkd * w[1], tz + rkp * e[2] + rkd * w[2]]
         force = _clip_norm(force, self.max_force)
         force[2] = min(force[2], self.max_lift)  # MuJoCo z is up
-        return np.concatenate([force, _clip_norm(torque, self.max_torque)])
+        return np.array(force + _clip_norm(torque, self.max_torque))
 
 
-def _clip_norm(v: np.ndarray, bound: float) -> np.ndarray:
-    n = math.sqrt(float(v @ v))
-    return v if n <= bound or n == 0.0 else v * (bound / n)
+def _clip_norm(v: list[float], bound: float) -> list[float]:
+    n = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    return v if n <= bound or n == 0.0 else [x * (bound / n) for x in v]
