@@ -74,7 +74,10 @@ def _default_humanoid() -> HumanoidConfig:
     Also tried on 96 generated motions projected once (13.95 mm with ankle kp 5000; 2026-11-24):
     MuJoCo's noslip pass (4 iterations), 13.86 mm; floor friction 1.5 / 2.0, 14.46 / 16.48 mm (the feet
     catch, MPJPE 72 -> 87 / 107 mm, Skate up); 240 Hz with the residual every 2 / 4 steps, 16.95 /
-    20.33 mm; the PGS / CG solvers, 14.00 / 13.63 mm, neither faster (CG 1.4x slower).
+    20.33 mm; the PGS / CG solvers, 14.00 / 13.63 mm, neither faster (CG 1.4x slower). With kp 1500 and the
+    reset at 0.15 m (10.05 mm; runs 28.7 mm, Float 17.6 mm; 2026-11-24): contacts over-damped, damping
+    ratio 1.5 / 2 / 3, 10.38 / 10.32 / 11.21 mm: the runs' Float drops to 15-16.5 mm, but the softer
+    contact sinks (Penetrate 0.43 -> 0.74 / 1.08 / 1.74 mm) and Skate and MPJPE grow.
     """
     gains = default_gains()
     gains["ankle"] = PDGain(1500.0, 150.0, gains["ankle"].torque_limit)
