@@ -27,7 +27,6 @@ from rich.console import Console
 from rich.table import Table
 
 from physmotion.diffusion.model import MotionDiffusion
-from physmotion.eval.physics_modes import parse_mode
 from physmotion.eval.prompts import PHYSICS_PROMPTS
 from physmotion.generate import GenerateConfig, generate
 
@@ -62,7 +61,7 @@ def main() -> None:
     args = parser.parse_args()
     model = MotionDiffusion.load(args.model)
     base = GenerateConfig(seconds=args.seconds)
-    generate(PHYSICS_PROMPTS[:1], parse_mode("none", base), model)  # warm-up: encoder load, first calls
+    generate(PHYSICS_PROMPTS[:1], replace(base, physics="none"), model)  # warm-up: encoder load, first calls
     times: dict[tuple[str, int], float] = {}
     stepping = 0.0  # mj_step seconds inside the best PhysDiff run at batch 1
     # Rounds interleave the modes, so a slow spell of the shared machine hits all of them alike.
@@ -73,13 +72,13 @@ def main() -> None:
                 inside = [0.0]
                 with _mj_step_clock(inside) if clocked else nullcontext():
                     start = time.perf_counter()
-                    generate(PHYSICS_PROMPTS[:batch], parse_mode(mode, base), model)
+                    generate(PHYSICS_PROMPTS[:batch], replace(base, physics=mode), model)
                     seconds = time.perf_counter() - start
                 if seconds < times.get((mode, batch), float("inf")):
                     times[mode, batch] = seconds
                     stepping = inside[0] if clocked else stepping
     # Batch 16's stepping, clocked with the projection in this process (untimed run).
-    config = parse_mode(PHYSDIFF, base)
+    config = replace(base, physics=PHYSDIFF)
     inside = [0.0]
     with _mj_step_clock(inside):
         generate(PHYSICS_PROMPTS[:16], replace(config, projection=replace(config.projection, workers=1)), model)

@@ -1,11 +1,15 @@
-"""PhysDiff against no physics and post-processing, with the default model: one table from one run.
+"""PhysDiff against no physics, no physics grounded on the floor, and post-processing, with the default
+model: one table from one run.
 
 Usage: python bench/physdiff_quality.py [--model DIR] [--prompts 32] [--seeds 0,1,2]
-Rows: none, post:1, post:4 (as many projections as PhysDiff's default), physdiff:end:4,space:1.
-Metrics on the humanoid's MuJoCo geometry posed on the joints, with the body P simulated for projected outputs
-(PhysDiff's Penetrate/Float/Skate/Phys-Err, mm), averaged over the seeds; "vs none" is also given per seed,
-because one seed's 32 motions move the ratio by about a point (PhysDiff on 2026-11-24: -80.9 / -82.4 /
--81.6 % for seeds 0 / 1 / 2).
+Rows: none (as sampled), none+floor (each motion moved vertically so the body's lowest surface point over
+the clip touches the floor: the fair baseline), post:1, post:4 (as many projections as PhysDiff's default),
+physdiff:end:4,space:1. Metrics on the humanoid's MuJoCo geometry posed on the joints, with the body P
+simulated for projected outputs (PhysDiff's Penetrate/Float/Skate/Phys-Err, mm), averaged over the seeds.
+"vs none" and "vs none+floor" are the change in Phys-Err; "per seed" gives "vs none+floor" for each seed,
+because one seed's 32 motions move the ratio by about a point. "no fall": projections (all of them,
+PhysDiff's four per motion included) in which the humanoid never fell; "reset": outputs with at least one
+reset (a jump back onto the motion), and resets per output.
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ from physmotion.eval.physics_modes import compare_modes
 from physmotion.eval.prompts import PHYSICS_PROMPTS
 from physmotion.generate import GenerateConfig
 
-MODES = ("none", "post:1", "post:4", "physdiff:end:4,space:1")
+MODES = ("none", "none+floor", "post:1", "post:4", "physdiff:end:4,space:1")
 COLUMNS = ("penetrate", "float", "skate", "phys_err")
 
 
@@ -36,18 +40,19 @@ def main() -> None:
     prompts = PHYSICS_PROMPTS[: args.prompts]
     runs = [compare_modes(model, prompts, MODES, GenerateConfig(seed=seed)) for seed in seeds]
     table = Table(title=f"physics modes, {len(prompts)} prompts, 6 s each, mean over seeds {args.seeds}")
-    for col in ("mode", "Penetrate", "Float", "Skate", "Phys-Err", "vs none", "per seed", "no fall",
-                "s/motion"):
+    for col in ("mode", "Penetrate", "Float", "Skate", "Phys-Err", "vs none", "vs none+floor",
+                "per seed (vs none+floor)", "no fall", "reset", "resets", "s/motion"):
         table.add_column(col, justify="left" if col == "mode" else "right")
-    none = np.mean([r["none"]["phys_err"] for r in runs])
+    base = {m: np.mean([r[m]["phys_err"] for r in runs]) for m in ("none", "none+floor")}
     for mode in MODES:
-        mean = {k: float(np.mean([r[mode][k] for r in runs]))
-                for k in (*COLUMNS, "tracked", "seconds_per_motion")}
-        per_seed = "/".join(f"{100 * (r[mode]['phys_err'] / r['none']['phys_err'] - 1):+.1f}" for r in runs)
-        change = f"{100 * (mean['phys_err'] / none - 1):+.1f}%"
-        no_fall = "-" if mode == "none" else f"{100 * mean['tracked']:.0f}%"
-        table.add_row(mode, *(f"{mean[k]:.2f}" for k in COLUMNS), change, per_seed, no_fall,
-                      f"{mean['seconds_per_motion']:.2f}")
+        mean = {k: float(np.mean([r[mode].get(k, np.nan) for r in runs]))
+                for k in (*COLUMNS, "tracked", "reset_rate", "resets", "seconds_per_motion")}
+        per_seed = "/".join(f"{100 * (r[mode]['phys_err'] / r['none+floor']['phys_err'] - 1):+.1f}" for r in runs)
+        changes = [f"{100 * (mean['phys_err'] / base[b] - 1):+.1f}%" for b in ("none", "none+floor")]
+        projected = mode.startswith(("post", "physdiff"))
+        falls = [f"{100 * mean['tracked']:.0f}%", f"{100 * mean['reset_rate']:.0f}%", f"{mean['resets']:.2f}"]
+        table.add_row(mode, *(f"{mean[k]:.2f}" for k in COLUMNS), *changes, per_seed,
+                      *(falls if projected else ["-"] * 3), f"{mean['seconds_per_motion']:.2f}")
     Console(width=160).print(table)
 
 

@@ -19,6 +19,7 @@ app = typer.Typer(
     no_args_is_help=True,
     pretty_exceptions_enable=False,
     add_completion=False,
+    rich_markup_mode=None,  # help is plain text: "physdiff:end:4" must not become an emoji
 )
 data_app = typer.Typer(help="Build and inspect HumanML3D-layout datasets.", no_args_is_help=True)
 app.add_typer(data_app, name="data")
@@ -115,7 +116,8 @@ def project_motion(
     motion = Motion.load(path)
     result = project(motion.joints, motion.fps)
     body = result.body if result.selected else None  # the input kept is not the humanoid's motion
-    replace(motion, joints=result.joints, rotations=None, offsets=None, humanoid=body).save(out)
+    resets = int(result.resets) if result.selected else None
+    replace(motion, joints=result.joints, rotations=None, offsets=None, humanoid=body, resets=resets).save(out)
     kept = "simulation kept" if result.selected else "tracking failed: input kept (flagged)"
     console.print(
         f"wrote {out}: {kept}; MPJPE mean {1000 * result.mpjpe.mean():.0f} mm, "
@@ -154,35 +156,46 @@ def metrics(
 def generate_cmd(
     texts: list[str] = typer.Argument(..., help="One or more captions, e.g. \"a person walks forward\"."),
     out: Path = typer.Option(Path("out"), "-o", "--out", help="Output folder."),
-    seconds: float = typer.Option(6.0, help="Length of each motion in seconds."),
-    physics: str = typer.Option("physdiff", help="physdiff (projection inside sampling), post, or none."),
-    schedule: str = typer.Option("end:4,space:1", help="PhysDiff projection steps: uniform:N, start:M,end:N, end:N,space:S."),
-    post_projections: int = typer.Option(1, help="--physics post: projections after sampling."),
-    num: int = typer.Option(1, help="Samples per caption."),
-    seed: int = typer.Option(0, help="Random seed; the same seed gives the same motions."),
-    sampler: str = typer.Option("ddim", help="ddim, ddpm or dpmpp (DPM-Solver++ 2M, Karras spacing)."),
-    steps: int = typer.Option(50, help="Sampling steps."),
-    eta: float = typer.Option(0.0, help="DDIM eta."),
-    cfg_scale: float = typer.Option(2.5, help="Classifier-free guidance scale."),
-    model: Path | None = typer.Option(None, help="Model folder (default: the shipped model)."),
+    seconds: float | None = typer.Option(None, help="Length of each motion in seconds (default: 6)."),
+    physics: str | None = typer.Option(
+        None, help="none, none+floor (plain sampling grounded on the body's surface), post[:K] (K projections "
+        "after sampling) or physdiff[:SCHEDULE] (projection inside sampling; SCHEDULE uniform:N, "
+        "start:M,end:N or end:N,space:S) (default: physdiff:end:4,space:1)."),
+    num: int | None = typer.Option(None, help="Samples per caption (default: 1)."),
+    seed: int | None = typer.Option(None, help="Random seed; the same seed gives the same motions (default: 0)."),
+    sampler: str | None = typer.Option(None, help="ddim, ddpm or dpmpp (DPM-Solver++ 2M, Karras) (default: ddim)."),
+    steps: int | None = typer.Option(None, help="Sampling steps (default: 50)."),
+    eta: float | None = typer.Option(None, help="DDIM eta (default: 0)."),
+    cfg_scale: float | None = typer.Option(None, help="Classifier-free guidance scale (default: 2.5)."),
+    model: Path | None = typer.Option(None, help="Model folder; the shipped model if left out."),
     preview: bool = typer.Option(True, help="Write a GIF preview per motion."),
 ) -> None:
-    """Generate motions from text: .npz, .bvh and a GIF preview per sample."""
+    """Generate motions from text: .npz, .bvh and a GIF preview per sample.
+
+    Unset options take GenerateConfig's and SamplerConfig's defaults (the values the help quotes)."""
     from physmotion.diffusion.model import MotionDiffusion
-    from physmotion.diffusion.samplers import SamplerConfig
     from physmotion.generate import GenerateConfig, check_request, generate, write_outputs
 
-    cfg = GenerateConfig(seconds=seconds, num=num, physics=physics, schedule=schedule,
-                         post_projections=post_projections, seed=seed,
-                         sampler=SamplerConfig(sampler=sampler, steps=steps, eta=eta, cfg_scale=cfg_scale))
+    cfg = _with(GenerateConfig(), seconds=seconds, num=num, physics=physics, seed=seed)
+    cfg.sampler = _with(cfg.sampler, sampler=sampler, steps=steps, eta=eta, cfg_scale=cfg_scale)
     net = MotionDiffusion.load(model)
     check_request(texts, cfg, net)
     with _step_bar("generating") as tick:
         result = generate(texts, cfg, net, on_step=tick)
     paths = write_outputs(result, out, cfg, preview=preview)
     log = result.projections
-    phys = f"; humanoid tracked without a fall in {sum(log.tracked)}/{len(log.tracked)} projections" if log.tracked else ""
+    phys = ""
+    if log.tracked:
+        phys = (f"; humanoid tracked without a fall in {sum(log.tracked)}/{len(log.tracked)} projections, "
+                f"{sum(result.resets)} reset(s) in the outputs (each a jump back onto the motion)")
     console.print(f"wrote {len(result.motions)} motion(s) to {out} ({len(paths)} files){phys}", highlight=False)
+
+
+def _with(config, **given):
+    """``config`` with the options the user gave (not None) replaced: the dataclass holds every default."""
+    from dataclasses import replace
+
+    return replace(config, **{k: v for k, v in given.items() if v is not None})
 
 
 def _step_bar(label: str):
@@ -209,29 +222,31 @@ app.add_typer(train_app, name="train")
 @train_app.command("denoiser")
 def train_denoiser_cmd(
     data: Path = typer.Option(..., help="HumanML3D-layout folder (our build or a real HumanML3D)."),
-    out: Path = typer.Option(..., help="Run folder: model, train_state.pt, loss.csv."),
-    arch: str = typer.Option("transformer", help="transformer (MDM) or unet (BioMoDiffuse's 1D UNet)."),
-    d_model: int = typer.Option(256, help="Width."),
-    layers: int = typer.Option(4, help="Transformer layers, or UNet levels."),
-    heads: int = typer.Option(4, help="Attention heads."),
-    crop: int = typer.Option(120, help="Training windows are cropped to at most this many frames."),
-    batch_size: int = typer.Option(32, help="Batch size."),
-    steps: int = typer.Option(4000, help="Total optimiser steps."),
-    lr: float = typer.Option(2e-4, help="AdamW learning rate."),
+    out: Path = typer.Option(..., "-o", "--out", help="Run folder: model, train_state.pt, loss.csv."),
+    arch: str | None = typer.Option(None, help="transformer (MDM) or unet (BioMoDiffuse's 1D UNet) (default: transformer)."),
+    d_model: int | None = typer.Option(None, help="Width (default: 256)."),
+    layers: int | None = typer.Option(None, help="Transformer layers, or UNet levels (default: 4)."),
+    heads: int | None = typer.Option(None, help="Attention heads (default: 4)."),
+    crop: int | None = typer.Option(None, help="Training windows are cropped to at most this many frames (default: 196)."),
+    batch_size: int | None = typer.Option(None, help="Batch size (default: 32)."),
+    steps: int | None = typer.Option(None, help="Total optimiser steps (default: 10000)."),
+    lr: float | None = typer.Option(None, help="AdamW learning rate (default: 0.0002)."),
     bf16: bool | None = typer.Option(None, "--bf16/--no-bf16", help="bf16 autocast; default: where the "
                                      "hardware has bf16 natively (a CPU without it is ~20x slower)."),
-    device: str = typer.Option("cpu", help="cpu or cuda (multi-GPU: run under `accelerate launch`)."),
-    seed: int = typer.Option(0, help="Seed of data order, noise and initialisation."),
-    checkpoint_minutes: float = typer.Option(5.0, help="Minutes between atomic checkpoints."),
+    device: str | None = typer.Option(None, help="cpu or cuda (multi-GPU: run under `accelerate launch`) (default: cpu)."),
+    seed: int | None = typer.Option(None, help="Seed of data order, noise and initialisation (default: 0)."),
+    checkpoint_minutes: float | None = typer.Option(None, help="Minutes between atomic checkpoints (default: 5.0)."),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in --out where it stopped."),
 ) -> None:
-    """Train a text-to-motion denoiser (DDPM, x0 prediction, EMA, classifier-free text dropout)."""
+    """Train a text-to-motion denoiser (DDPM, x0 prediction, EMA, classifier-free text dropout).
+
+    Unset options take TrainConfig's and DenoiserConfig's defaults (the values the help quotes)."""
     from physmotion.diffusion.denoiser import DenoiserConfig
     from physmotion.diffusion.train import TrainConfig, train_denoiser
 
-    den = DenoiserConfig(arch=arch, d_model=d_model, layers=layers, heads=heads, max_frames=max(196, crop))
-    cfg = TrainConfig(data=str(data), out=str(out), denoiser=den, crop=crop, batch_size=batch_size, steps=steps,
-                      lr=lr, bf16=bf16, device=device, seed=seed, checkpoint_minutes=checkpoint_minutes)
+    den = _with(DenoiserConfig(), arch=arch, d_model=d_model, layers=layers, heads=heads)
+    cfg = _with(TrainConfig(data=str(data), out=str(out), denoiser=den), crop=crop, batch_size=batch_size,
+                steps=steps, lr=lr, bf16=bf16, device=device, seed=seed, checkpoint_minutes=checkpoint_minutes)
     result = train_denoiser(cfg, resume=resume, progress=sys.stderr.isatty())
     last = f", last loss {result.losses[-1][1]:.4f}" if result.losses else ""
     console.print(f"trained to step {result.step} in {result.seconds / 60:.1f} min{last}; model in {out}",
@@ -265,29 +280,30 @@ def train_evaluator_cmd(
 @app.command("evaluate")
 def evaluate_cmd(
     data: Path = typer.Option(..., help="HumanML3D-layout folder to evaluate on."),
-    model: Path | None = typer.Option(None, help="Model folder (default: the shipped model)."),
-    evaluator: Path | None = typer.Option(None, help="Evaluator folder (default: the shipped one)."),
-    split: str = typer.Option("test", help="Split to evaluate on."),
-    physics: str = typer.Option("none,post:1,post:4,physdiff:end:4,space:1",
-                                help="Comma-separated modes: none, post:K, physdiff:<schedule>."),
-    repeats: int = typer.Option(3, help="Repeated generation runs (95% intervals over them)."),
-    steps: int = typer.Option(50, help="Sampling steps (DDIM)."),
-    seed: int = typer.Option(0, help="Random seed."),
+    model: Path | None = typer.Option(None, help="Model folder; the shipped model if left out."),
+    evaluator: Path | None = typer.Option(None, help="Evaluator folder; the shipped one if left out."),
+    split: str | None = typer.Option(None, help="Split to evaluate on (default: test)."),
+    physics: str | None = typer.Option(
+        None, help="Comma-separated modes: none, none+floor, post:K, physdiff:<schedule> "
+        "(default: none,none+floor,post:1,post:4,physdiff:end:4,space:1)."),
+    repeats: int | None = typer.Option(None, help="Repeated generation runs (95% intervals over them) (default: 3)."),
+    steps: int | None = typer.Option(None, help="Sampling steps (DDIM) (default: 50)."),
+    seed: int | None = typer.Option(None, help="Random seed (default: 0)."),
     quick: bool = typer.Option(False, "--quick", help="Smoke run: 32 motions, 2 repeats, 10 steps."),
     out: Path = typer.Option(Path("results/evaluate"), "-o", "--out", help="Writes <out>.md and <out>.json."),
 ) -> None:
-    """Generation metrics (our evaluator) and physical metrics per physics mode, as the papers' tables."""
-    from dataclasses import replace
+    """Generation metrics (our evaluator) and physical metrics per physics mode, as the papers' tables.
 
+    Unset options take EvaluateConfig's defaults (the values the help quotes)."""
     from physmotion.diffusion.model import MotionDiffusion
     from physmotion.eval.evaluator import Evaluator
-    from physmotion.eval.table import EvaluateConfig, evaluate, split_modes
+    from physmotion.eval.table import EvaluateConfig, evaluate
+    from physmotion.physics_mode import parse_modes
 
-    modes = tuple(split_modes(physics))
-    cfg = EvaluateConfig.quick(modes=modes, split=split, seed=seed) if quick else EvaluateConfig(
-        modes=modes, split=split, repeats=repeats, seed=seed)  # fmt: skip
-    if not quick:
-        cfg.base.sampler = replace(cfg.base.sampler, steps=steps)
+    modes = tuple(str(m) for m in parse_modes(physics)) if physics is not None else None
+    cfg = _with(EvaluateConfig.quick() if quick else EvaluateConfig(), modes=modes, split=split, seed=seed,
+                repeats=None if quick else repeats)
+    cfg.base.sampler = _with(cfg.base.sampler, steps=None if quick else steps)
     net, judge = MotionDiffusion.load(model), Evaluator.load(evaluator)
     with _step_bar("evaluating") as tick:
         table = evaluate(net, judge, data, cfg, on_progress=tick)

@@ -27,6 +27,8 @@ class Motion:
     humanoid: (22, 3) rest offsets of the simulated humanoid whose motion this is (the physics
     projection's output: ``ProjectedMotion.body``), or None. The physical metrics pose that body's
     geometry on the joints instead of one estimated from them.
+    resets: for P's output, how often the humanoid fell and was put back on the motion (each a jump in
+    the joints); None where P was not applied.
     """
 
     joints: np.ndarray
@@ -37,6 +39,7 @@ class Motion:
     licence_tag: str = ""
     source: str = ""
     humanoid: np.ndarray | None = None
+    resets: int | None = None
 
     def __post_init__(self) -> None:
         self.joints = np.asarray(self.joints, dtype=np.float32)
@@ -82,6 +85,8 @@ class Motion:
             arrays["offsets"] = np.asarray(self.offsets, dtype=np.float32)
         if self.humanoid is not None:
             arrays["humanoid"] = np.asarray(self.humanoid, dtype=np.float64)
+        if self.resets is not None:
+            arrays["resets"] = np.int64(self.resets)
         write_atomic(path, lambda f: np.savez(f, **arrays))
 
     @classmethod
@@ -104,6 +109,7 @@ class Motion:
                     licence_tag=str(data["licence_tag"]) if "licence_tag" in data else "",
                     source=str(data["source"]) if "source" in data else "",
                     humanoid=data["humanoid"] if "humanoid" in data else None,
+                    resets=int(data["resets"]) if "resets" in data else None,
                 )
         except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
             raise MotionFormatError(f"{path}: not a readable .npz file ({exc})") from None

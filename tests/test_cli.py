@@ -120,3 +120,50 @@ def test_project_writes_the_simulated_motion(mocap_dir: Path, tmp_path: Path) ->
     assert projected.humanoid is not None and projected.humanoid.shape == (22, 3)  # for `metrics`
     res = run("project", tmp_path / "missing.npz", "-o", tmp_path / "x.npz")
     assert res.returncode == 1 and res.stderr.startswith("error: ") and not (tmp_path / "x.npz").exists()
+
+
+def _help_defaults(*command: str) -> dict[str, str]:
+    """``--option -> default`` as the help of a command states them ("(default: X).")."""
+    res = subprocess.run([sys.executable, "-m", "physmotion.cli", *command, "--help"], capture_output=True,
+                         text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    found: dict[str, str] = {}
+    for block in re.split(r"\n\s*(?=(?:-\w, )?--[a-z])", res.stdout):  # one block per option, unwrapped
+        flat = " ".join(block.split())
+        opt = re.match(r"(?:-\w, )?--([a-z0-9-]+)", flat)
+        value = re.search(r"\(default: ([^)]+)\)\.", flat)
+        if opt and value:
+            found[opt.group(1)] = value.group(1)
+    return found
+
+
+def test_help_defaults_are_the_dataclasses() -> None:
+    """Options default to None and the command fills in only what was given: the dataclasses hold every
+    default, and the values the help quotes must be theirs."""
+    from physmotion.diffusion.denoiser import DenoiserConfig
+    from physmotion.diffusion.train import TrainConfig
+    from physmotion.eval.table import EvaluateConfig
+    from physmotion.generate import GenerateConfig
+
+    gen = GenerateConfig()
+    expected = {"seconds": gen.seconds, "physics": gen.physics, "num": gen.num, "seed": gen.seed,
+                "sampler": gen.sampler.sampler, "steps": gen.sampler.steps, "eta": gen.sampler.eta,
+                "cfg-scale": gen.sampler.cfg_scale}  # fmt: skip
+    stated = _help_defaults("generate")
+    assert set(stated) == set(expected)
+    for name, value in expected.items():
+        assert stated[name] == (str(value) if not isinstance(value, float) else f"{value:g}"), name
+
+    train, den = TrainConfig(data="", out=""), DenoiserConfig()
+    expected = {"arch": den.arch, "d-model": den.d_model, "layers": den.layers, "heads": den.heads,
+                "crop": train.crop, "batch-size": train.batch_size, "steps": train.steps, "lr": train.lr,
+                "device": train.device, "seed": train.seed, "checkpoint-minutes": train.checkpoint_minutes}  # fmt: skip
+    stated = _help_defaults("train", "denoiser")
+    assert set(stated) == set(expected)
+    for name, value in expected.items():
+        assert stated[name] == str(value), name
+
+    ev = EvaluateConfig()
+    expected = {"split": ev.split, "physics": ",".join(ev.modes), "repeats": ev.repeats,
+                "steps": ev.base.sampler.steps, "seed": ev.seed}  # fmt: skip
+    assert _help_defaults("evaluate") == {k: str(v) for k, v in expected.items()}

@@ -30,9 +30,9 @@ def test_none_gives_num_motions_per_text_deterministically(tiny_model) -> None:
 
 
 def test_physdiff_and_post_call_the_projection(tiny_model) -> None:
-    phys = generate(["a person walks"], _cfg(physics="physdiff", schedule="end:2,space:1"), tiny_model)
+    phys = generate(["a person walks"], _cfg(physics="physdiff:end:2,space:1"), tiny_model)
     assert phys.projections.calls == 2
-    post = generate(["a person walks"], _cfg(physics="post", post_projections=2), tiny_model)
+    post = generate(["a person walks"], _cfg(physics="post:2"), tiny_model)
     assert post.projections.calls == 2 and len(post.projections.selected) == 2
     # The output is P's simulation: each motion comes with the humanoid body it was simulated with, the
     # surface its physical metrics are measured on; the last step is projected, so physdiff's is too.
@@ -42,7 +42,7 @@ def test_physdiff_and_post_call_the_projection(tiny_model) -> None:
     # with this untrained model the humanoid falls, so imitation selection keeps the input: same as none
     none = generate(["a person walks"], _cfg(), tiny_model)
     assert none.bodies == [None]
-    unprojected_end = generate(["a person walks"], _cfg(physics="physdiff", schedule="start:1,end:0"),
+    unprojected_end = generate(["a person walks"], _cfg(physics="physdiff:start:1,end:0"),
                                tiny_model)
     assert unprojected_end.bodies == [None]  # its last step was not projected: not P's output
     if not any(post.projections.selected):
@@ -70,15 +70,34 @@ def test_outputs_are_written(tiny_model, tmp_path: Path) -> None:
         ([""], _cfg(), "empty"),
         (["walk"], _cfg(seconds=600), "seconds"),
         (["walk"], _cfg(seconds=float("nan")), "seconds"),
-        (["walk"], _cfg(physics="magic"), "physics"),
-        (["walk"], _cfg(physics="physdiff", schedule="end:99,space:1"), "schedule"),
+        (["walk"], {"physics": "physdiff:end:99,space:1"}, "schedule"),
         (["x" * 600], _cfg(), "characters"),
         (["walk"], _cfg(num=0), "num"),
     ],
 )
 def test_bad_requests(tiny_model, texts, config, message) -> None:
     with pytest.raises(PhysmotionError, match=message):
-        generate(texts, config, tiny_model)
+        generate(texts, _cfg(**config) if isinstance(config, dict) else config, tiny_model)
+
+
+@pytest.mark.parametrize("spelling", ["magic", "post:x", "post:0", "none:3", "physdiff:sideways:3"])
+def test_bad_physics_modes(spelling: str) -> None:
+    with pytest.raises(PhysmotionError, match="physics mode|post|schedule"):
+        GenerateConfig(physics=spelling).physics.hook_steps(50)
+
+
+def test_none_floor_grounds_each_motion_on_its_body_surface(tiny_model) -> None:
+    """none+floor = none moved vertically so the body's lowest surface point over the clip is on y = 0."""
+    from physmotion.physics.surface import HumanoidSurface
+
+    none = generate(["a person walks"], _cfg(num=2), tiny_model)
+    floor = generate(["a person walks"], _cfg(num=2, physics="none+floor"), tiny_model)
+    for a, b in zip(none.motions, floor.motions):
+        shift = b.joints - a.joints
+        assert np.allclose(shift[..., [0, 2]], 0) and np.allclose(shift[..., 1], shift[0, 0, 1], atol=1e-5)
+        assert b.humanoid is not None and b.resets is None
+        assert HumanoidSurface(b.humanoid).lowest_height(b.joints.astype(np.float64)).min() == pytest.approx(0, abs=1e-5)
+    assert floor.projections.calls == 0
 
 
 def test_slug() -> None:
@@ -99,7 +118,8 @@ def test_cli_generate_writes_files(tiny_model_dir: Path, tmp_path: Path) -> None
     [
         (["", "--seconds", "2"], "text is empty"),
         (["walk", "--seconds", "1000"], "--seconds must be between"),
-        (["walk", "--schedule", "sideways:3"], "bad schedule"),
+        (["walk", "--physics", "physdiff:sideways:3"], "bad schedule"),
+        (["walk", "--physics", "magic"], "unknown physics mode"),
     ],
 )
 def test_cli_bad_input_is_one_line_and_writes_nothing(tiny_model_dir: Path, tmp_path: Path, args, message) -> None:

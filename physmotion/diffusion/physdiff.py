@@ -23,31 +23,9 @@ import torch
 from physmotion.conventions import FPS
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.errors import PhysmotionError
-from physmotion.features.humanml3d import extract_features, recover_from_ric
+from physmotion.features.biomech import FEATURE_DIM_BIOMECH, extract_features_329
+from physmotion.features.humanml3d import FEATURE_DIM, extract_features, recover_from_ric
 from physmotion.physics.projection import ProjectionConfig, project
-
-DEFAULT_SCHEDULE = "end:4,space:1"
-
-
-def sampling_projection() -> ProjectionConfig:
-    """P as generation uses it (physdiff and post): the humanoid is put back on the motion where its error
-    passes tau = 0.15 m, or the motion is moved to it where it has only drifted
-    (``ProjectionConfig.follow_drift``), so P always returns a simulated motion (``reset_on_fail``).
-
-    Measured on the 32 bench prompts (bench/physdiff_quality.py), PhysDiff's Phys-Err against none:
-    - model at step 3229, ankle kp 5000: -75 / -76 / -72 / -68 % at tau 0.15 / 0.2 / 0.3 / 0.5 m;
-    - step 7904, ankle kp 1500 (2026-11-24), seeds 0 / 1 / 2: -79.3 / -80.8 / -80.5 % at 0.2 m, -80.9 /
-      -82.4 / -81.6 % at 0.15 m. Projecting those 96 motions' plain samples once: 10.43 -> 10.05 mm;
-      the runs gain (30.5 -> 28.7 mm, Float 19.2 -> 17.6) because a runner that bounces above its
-      reference is put back sooner. The cost is more resets, each a jump in the output (per run 0.44 ->
-      1.06 in 6 s, per other motion 0.13 -> 0.18; PhysDiff's projections without a fall 87 / 84 / 95 ->
-      81 / 83 / 87 %). 0.15 was chosen on these prompts; on the test split (58 motions, their own
-      captions), the independent check, the two are equal: 8.01 / 7.95 mm, IFR 0.155 / 0.172, jerk 172 /
-      160 m/s^3.
-    - Not taken: 0.125 / 0.1 m (projected once: 9.47 / 9.52 mm) put a run back 2.1 times in 6 s at 0.125.
-    """
-    return ProjectionConfig(reset_on_fail=True, tau=0.15)
-
 
 def reset_settings(config: ProjectionConfig) -> dict[str, bool | float]:
     """How P treats a fall, as recorded with generated files and evaluation tables."""
@@ -88,34 +66,38 @@ class ProjectionLog:
     tracked: list[bool] = field(default_factory=list)  # ... and the humanoid never fell (no reset)
     mpjpe_mm: list[float] = field(default_factory=list)
     residual: list[float] = field(default_factory=list)
+    resets: list[int] = field(default_factory=list)  # times the humanoid was put back (a jump in the output)
 
 
 class FeatureProjector:
     """P on normalised HumanML3D features: (B, T, 263) normalised + lengths -> same, physically projected."""
 
     def __init__(self, model: MotionDiffusion, config: ProjectionConfig | None = None, fps: float = FPS) -> None:
-        self.model, self.config, self.fps = model, config or sampling_projection(), fps
+        self.model, self.config, self.fps = model, config or ProjectionConfig.sampling(), fps
         self.log = ProjectionLog()
         self.last_joints: list[np.ndarray] = []  # P's output of the latest call, physical coordinates
         self.last_bodies: list[np.ndarray] = []  # ... and the humanoid bodies it was simulated with
+        self.last_resets: list[int] = []  # ... and how often each was reset
 
     def project_joints(self, joints: list[np.ndarray]) -> list[np.ndarray]:
         """Project a list of joint arrays (T_i, 22, 3); motions of equal length go through in one batch."""
         out: list[np.ndarray] = [np.empty(0)] * len(joints)
         bodies: list[np.ndarray] = [np.empty(0)] * len(joints)
+        resets = [0] * len(joints)
         by_len: dict[int, list[int]] = {}
         for i, j in enumerate(joints):
             by_len.setdefault(len(j), []).append(i)
         for idx in by_len.values():
             res = project(np.stack([joints[i] for i in idx]), self.fps, self.config)
             for k, i in enumerate(idx):
-                out[i], bodies[i] = res.joints[k], res.body[k]
+                out[i], bodies[i], resets[i] = res.joints[k], res.body[k], int(res.resets[k])
+                self.log.resets.append(resets[i])
                 self.log.selected.append(bool(res.selected[k]))
                 self.log.tracked.append(bool(res.success[k]))
                 self.log.mpjpe_mm.append(float(1000 * res.mpjpe[k].mean()))
                 self.log.residual.append(float(res.residual_force[k].mean()))
         self.log.calls += 1
-        self.last_joints, self.last_bodies = out, bodies
+        self.last_joints, self.last_bodies, self.last_resets = out, bodies, resets
         return out
 
     def __call__(self, x0: torch.Tensor, lengths: list[int]) -> torch.Tensor:
@@ -124,8 +106,9 @@ class FeatureProjector:
         joints = [recover_from_ric(feats[i, :n].astype(np.float64)) for i, n in enumerate(lengths)]
         projected = self.project_joints(joints)
         out = x0.detach().clone()
+        dim = x0.shape[-1]  # 263, or BioMoDiffuse's 329: the features are re-extracted in the model's own
         for i, (n, j) in enumerate(zip(lengths, projected)):
-            out[i, :n] = torch.from_numpy(norm.normalize(joints_to_features(j))).to(out)
+            out[i, :n] = torch.from_numpy(norm.normalize(joints_to_features(j, dim))).to(out)
         return out
 
 
@@ -135,11 +118,15 @@ def on_data_floor(joints: np.ndarray) -> np.ndarray:
     return joints - np.array([0.0, joints[..., 1].min(), 0.0])
 
 
-def joints_to_features(joints: np.ndarray) -> np.ndarray:
-    """HumanML3D features with one row per frame: (T, 22, 3) -> (T, 263).
+def joints_to_features(joints: np.ndarray, dim: int = FEATURE_DIM) -> np.ndarray:
+    """HumanML3D features with one row per frame: (T, 22, 3) -> (T, dim), dim 263 or 329 (BioMoDiffuse).
 
     HumanML3D's features of T frames describe T-1 transitions; a last frame extrapolated at constant
     velocity keeps the length, so a projected x0 replaces the denoised one frame for frame.
     """
     ext = np.concatenate([joints, 2 * joints[-1:] - joints[-2:-1]], axis=0)
+    if dim == FEATURE_DIM_BIOMECH:
+        return extract_features_329(ext)[0]
+    if dim != FEATURE_DIM:
+        raise PhysmotionError(f"features must be {FEATURE_DIM}- or {FEATURE_DIM_BIOMECH}-dimensional, got {dim}")
     return extract_features(ext)[0]

@@ -1,8 +1,5 @@
-"""Generation modes side by side: ``none``, ``post:K`` and ``physdiff:<schedule>``, with physical metrics.
-
-A mode string is what ``physmotion generate`` spells with two options: ``post:4`` is ``--physics post
---post-projections 4``; ``physdiff:end:4,space:1`` is ``--physics physdiff --schedule end:4,space:1``.
-"""
+"""Generation modes side by side (``none``, ``none+floor``, ``post:K``, ``physdiff:<schedule>``: see
+:mod:`physmotion.physics_mode`), with physical metrics."""
 
 from __future__ import annotations
 
@@ -15,23 +12,19 @@ import numpy as np
 from physmotion.conventions import FPS
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.errors import PhysmotionError
-from physmotion.generate import GenerateConfig, generate
+from physmotion.generate import GenerateConfig, GenerateResult, generate
 from physmotion.metrics import physical_metrics
+from physmotion.physics_mode import PhysicsMode
 
 
-def parse_mode(mode: str, base: GenerateConfig) -> GenerateConfig:
-    """The generation config of a mode string (see the module docstring)."""
-    name, _, arg = mode.partition(":")
-    if name == "none" and not arg:
-        return replace(base, physics="none")
-    if name == "post":
-        try:
-            return replace(base, physics="post", post_projections=int(arg or 1))
-        except ValueError:
-            raise PhysmotionError(f"bad mode {mode!r}: post takes a count, e.g. post:4") from None
-    if name == "physdiff":
-        return replace(base, physics="physdiff", schedule=arg or base.schedule)
-    raise PhysmotionError(f"bad mode {mode!r}: use none, post:K or physdiff:<schedule>")
+def reset_columns(results: Sequence[GenerateResult]) -> dict[str, float]:
+    """What the falls did to the outputs of projecting modes: ``reset_rate``, the share of output motions
+    whose projection put the humanoid back at least once (error past tau, 0.15 m in generation), and
+    ``resets``, the mean number of such jumps per output motion. Empty for modes without P's output."""
+    counts = [m.resets for r in results for m in r.motions if m.resets is not None]
+    if not counts:
+        return {}
+    return {"reset_rate": float(np.mean([c > 0 for c in counts])), "resets": float(np.mean(counts))}
 
 
 def metric_surface(name: str, bodies: Sequence[np.ndarray | None] | None = None):
@@ -50,20 +43,21 @@ def metric_surface(name: str, bodies: Sequence[np.ndarray | None] | None = None)
 def compare_modes(
     model: MotionDiffusion,
     prompts: Sequence[str],
-    modes: Sequence[str],
+    modes: Sequence[str | PhysicsMode],
     base: GenerateConfig | None = None,
     surface: str = "humanoid",
 ) -> dict[str, dict[str, float]]:
-    """Generate one motion per prompt in each mode; mode -> physical metrics (mean over motions) plus
-    ``seconds_per_motion`` and ``tracked`` (fraction of projections in which the humanoid never fell).
+    """Generate one motion per prompt in each mode; mode spelling -> physical metrics (mean over
+    motions) plus ``seconds_per_motion``, ``tracked`` (fraction of all projections, PhysDiff's four per
+    motion included, in which the humanoid never fell) and :func:`reset_columns`.
 
     surface "humanoid": the humanoid's geometry, with the body P simulated for projected outputs and one
     estimated from the joints otherwise; "joints": the joint-only surface model."""
     base = base or GenerateConfig()
     metric_surface(surface)  # a bad name fails before any work
     results: dict[str, dict[str, float]] = {}
-    for mode in modes:
-        cfg = parse_mode(mode, base)
+    for mode in [PhysicsMode.parse(m) for m in modes]:
+        cfg = replace(base, physics=mode)
         start = time.perf_counter()
         out = generate(list(prompts), cfg, model)
         seconds = time.perf_counter() - start
@@ -72,5 +66,6 @@ def compare_modes(
         row["seconds_per_motion"] = seconds / len(prompts)
         log = out.projections
         row["tracked"] = float(np.mean(log.tracked)) if log.tracked else float("nan")
-        results[mode] = row
+        row.update(reset_columns([out]))
+        results[str(mode)] = row
     return results

@@ -132,3 +132,22 @@ class HumanoidSurface:
 
     def foot_heights(self, joints: np.ndarray) -> np.ndarray:
         return self._per_frame(joints)[1]
+
+
+def ground_on_surface(
+    joints: np.ndarray, body: np.ndarray | None = None, config: HumanoidConfig | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """A motion moved up or down so that the lowest point of the humanoid's surface over the clip
+    touches the floor (y = 0): the physical metrics' convention (:mod:`physmotion.metrics.physical`).
+
+    joints: (T, 22, 3) metres, Y up, e.g. in the data convention (lowest joint at y = 0, which leaves
+    the soles ~1.5 cm under the floor). body: the humanoid's rest offsets (22, 3), estimated from the
+    joints if None. Returns (joints shifted, same dtype; the body used), so the motion can be measured on
+    the very body it was grounded with.
+    """
+    x = np.asarray(joints)
+    if x.ndim != 3 or x.shape[1:] != (NUM_JOINTS, 3):
+        raise ShapeError(f"joints must be (T, 22, 3), got {x.shape}")
+    body = body_from_joints(x) if body is None else np.asarray(body, dtype=np.float64)
+    low = HumanoidSurface(body, config).lowest_height(x.astype(np.float64))
+    return (x - np.array([0.0, low.min(), 0.0])).astype(x.dtype), body

@@ -7,27 +7,32 @@ import pytest
 
 from physmotion.diffusion.samplers import SamplerConfig
 from physmotion.errors import PhysmotionError
-from physmotion.eval.table import REAL, EvaluateConfig, evaluate, split_modes
+from physmotion.eval.table import REAL, EvaluateConfig, evaluate
 from physmotion.generate import GenerateConfig
+from physmotion.physics_mode import PhysicsMode, parse_modes
 
 
-def test_split_modes_keeps_schedule_commas():
-    assert split_modes("none,post:1,post:4,physdiff:end:4,space:1") == [
-        "none", "post:1", "post:4", "physdiff:end:4,space:1"]  # fmt: skip
-    assert split_modes("physdiff:start:2,end:2, physdiff:uniform:4") == ["physdiff:start:2,end:2", "physdiff:uniform:4"]
+def test_parse_modes_keeps_schedule_commas_and_spells_back():
+    modes = parse_modes("none,none+floor,post:1,post,physdiff:end:4,space:1,physdiff")
+    assert [str(m) for m in modes] == ["none", "none+floor", "post:1", "post:1", "physdiff:end:4,space:1",
+                                       "physdiff:end:4,space:1"]  # fmt: skip
+    assert [str(m) for m in parse_modes("physdiff:start:2,end:2, physdiff:uniform:4")] == [
+        "physdiff:start:2,end:2", "physdiff:uniform:4"]  # fmt: skip
+    assert PhysicsMode.parse("post:4") == PhysicsMode("post", projections=4) and str(PhysicsMode()) == "physdiff:end:4,space:1"
     with pytest.raises(PhysmotionError):
-        split_modes(" , ")
+        parse_modes(" , ")
 
 
 @pytest.fixture(scope="module")
 def quick_table(tiny_model, tiny_evaluator, built_dir):
     base = GenerateConfig(sampler=SamplerConfig(steps=5))
-    cfg = EvaluateConfig(modes=("none", "post:1", "physdiff:end:1,space:1"), repeats=2, max_motions=32, base=base)
+    cfg = EvaluateConfig(modes=("none", "none+floor", "post:1", "physdiff:end:1,space:1"), repeats=2,
+                         max_motions=32, base=base)
     return evaluate(tiny_model, tiny_evaluator, built_dir, cfg)
 
 
 def test_quick_table_has_every_row_and_metric(quick_table):
-    assert list(quick_table.rows) == [REAL, "none", "post:1", "physdiff:end:1,space:1"]
+    assert list(quick_table.rows) == [REAL, "none", "none+floor", "post:1", "physdiff:end:1,space:1"]
     for name, row in quick_table.rows.items():
         for key in ("R@1", "R@2", "R@3", "FID", "MM-Dist", "Diversity", "penetrate", "float", "skate", "phys_err"):
             mean, half = row[key]
@@ -36,7 +41,14 @@ def test_quick_table_has_every_row_and_metric(quick_table):
         if name != REAL:
             assert row["sec/motion"][0] > 0
             assert 0 < row["MModality"][0] < 2  # unit embeddings: distances below 2
-    assert "ifr" in quick_table.rows["post:1"] and "ifr" not in quick_table.rows["none"]
+    for name in ("post:1", "physdiff:end:1,space:1"):  # P's outputs: their resets are counted
+        assert 0 <= quick_table.rows[name]["reset_rate"][0] <= 1 and quick_table.rows[name]["resets"][0] >= 0
+    for name in (REAL, "none", "none+floor"):
+        assert "reset_rate" not in quick_table.rows[name] and "ifr" not in quick_table.rows[name]
+    # the metrics' floor convention: real motions grounded on the body surface sink nowhere, and
+    # none+floor never penetrates more than none
+    assert quick_table.rows[REAL]["penetrate"][0] < 2.0
+    assert quick_table.rows["none+floor"]["penetrate"][0] <= quick_table.rows["none"]["penetrate"][0] + 1e-9
     assert quick_table.meta["motions"] == 32 and quick_table.meta["repeats"] == 2
 
 

@@ -54,11 +54,11 @@ def test_sizes_and_names(default_model) -> None:
 
 def test_options_follow_config(default_model) -> None:
     m = default_model
-    assert m.opt.timestep == pytest.approx(1 / 120)
+    assert m.opt.timestep == pytest.approx(1 / 360)
     assert m.opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     assert m.opt.solver == mujoco.mjtSolver.mjSOL_NEWTON
     assert m.opt.iterations == 50
-    assert HumanoidConfig().substeps == 4  # control at 30 Hz
+    assert HumanoidConfig().substeps == 12  # control at 30 Hz
     assert HumanoidConfig(sim_dt=1 / 240).substeps == 8
     with pytest.raises(ShapeError):
         HumanoidConfig(sim_dt=1 / 120, control_dt=1 / 50)
