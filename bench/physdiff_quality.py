@@ -1,7 +1,9 @@
 """PhysDiff against no physics, no physics grounded on the floor, and post-processing, with the default
 model: one table from one run.
 
-Usage: python bench/physdiff_quality.py [--model DIR] [--prompts 32] [--seeds 0,1,2]
+Usage: python bench/physdiff_quality.py [--model DIR] [--prompts 32] [--seeds 0,1,2] [--json FILE]
+(--json also writes every mode's metrics per seed, e.g. results/physdiff_quality.json, which the README
+quotes and tests/test_results.py checks it against.)
 Rows: none (as sampled), none+floor (each motion moved vertically so the body's lowest surface point over
 the clip touches the floor: the fair baseline), post:1, post:4 (as many projections as PhysDiff's default),
 physdiff:end:4,space:1. Metrics on the humanoid's MuJoCo geometry posed on the joints, with the body P
@@ -15,6 +17,7 @@ reset (a jump back onto the motion), and resets per output.
 from __future__ import annotations
 
 import argparse
+import json
 
 import numpy as np
 from rich.console import Console
@@ -24,6 +27,7 @@ from physmotion.diffusion.model import MotionDiffusion
 from physmotion.eval.physics_modes import compare_modes
 from physmotion.eval.prompts import PHYSICS_PROMPTS
 from physmotion.generate import GenerateConfig
+from physmotion.motion import write_atomic
 
 MODES = ("none", "none+floor", "post:1", "post:4", "physdiff:end:4,space:1")
 COLUMNS = ("penetrate", "float", "skate", "phys_err")
@@ -34,6 +38,7 @@ def main() -> None:
     parser.add_argument("--model", default=None)
     parser.add_argument("--prompts", type=int, default=32)
     parser.add_argument("--seeds", default="0,1,2", help="comma-separated sampling seeds")
+    parser.add_argument("--json", default=None, help="also write the per-seed metrics to this file")
     args = parser.parse_args()
     seeds = [int(s) for s in args.seeds.split(",")]
     model = MotionDiffusion.load(args.model)
@@ -53,7 +58,11 @@ def main() -> None:
         falls = [f"{100 * mean['tracked']:.0f}%", f"{100 * mean['reset_rate']:.0f}%", f"{mean['resets']:.2f}"]
         table.add_row(mode, *(f"{mean[k]:.2f}" for k in COLUMNS), *changes, per_seed,
                       *(falls if projected else ["-"] * 3), f"{mean['seconds_per_motion']:.2f}")
-    Console(width=160).print(table)
+    Console(width=160, emoji=False).print(table)
+    if args.json:
+        meta = {"prompts": len(prompts), "seconds": GenerateConfig().seconds, "seeds": seeds,
+                "model_steps": model.info.get("steps")}
+        write_atomic(args.json, lambda f: f.write(json.dumps({"meta": meta, "runs": runs}, indent=2)), "w")
 
 
 if __name__ == "__main__":

@@ -3,7 +3,8 @@
     python bench/physics_raw.py [--seconds 5] [--repeats 3]
 
 Rows: ``mj_step`` of the default humanoid holding its standing rest pose under PD (single thread,
-the model's dt 1/120, implicitfast + Newton, feet in contact), with and without the floor contacts
+``HumanoidConfig()``'s set-up, which the projection uses: dt 1/360 s, implicitfast + Newton, feet in
+contact), with and without the floor contacts
 (pelvis hung 1 m up); ``mj_kinematics`` alone; ``joints_to_qpos`` / ``qpos_to_joints`` on a 196-frame
 synthetic walk (HumanML3D's longest window). Best of ``--repeats`` wall-clock runs; the machine is
 shared, so expect +-20-30 %.

@@ -2,7 +2,7 @@
 
 Usage: python bench/projection_quality.py [--mocap ../shared/data/mocap] [--limit N]
 Prints success rate, MPJPE, residual used and the physical metrics of input and output, both measured
-on the humanoid's collision geometry (the input raised by the sole depth, as the projection does).
+on the humanoid's collision geometry (the input grounded on it: the metrics' floor convention).
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""Pieces every training loop here shares: seeded per-step randomness, epoch-wise batches, a loss bar.
+"""Pieces every training loop here shares: seeded per-step randomness, epoch-wise batches, the warm-up
+learning rate, the divergence check, a loss bar.
 
 Exact resumption without saving RNG streams: the batch order of epoch e is a permutation drawn from
 ``(seed, e)``, and a step's randomness comes from generators seeded by ``(seed, step)``, so a resumed run
@@ -11,6 +12,8 @@ import math
 
 import numpy as np
 import torch
+
+from physmotion.errors import PhysmotionError
 
 
 def seeded_generator(seed: int, *key: int) -> torch.Generator:
@@ -27,6 +30,22 @@ def bf16_helps(device: str) -> bool:
         return torch.cuda.is_available() and torch.cuda.is_bf16_supported()
     # Private, but it is the check PyTorch's own CPU autocast tests use; there is no public one.
     return bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
+
+
+def seed_dropout(g: torch.Generator) -> None:
+    """Seed torch's global RNG, which dropout draws from, from the step's generator ``g``."""
+    torch.manual_seed(int(torch.randint(0, 2**31 - 1, (1,), generator=g)))
+
+
+def warmup_lr(lr: float, warmup: int, step: int) -> float:
+    """Learning rate at ``step``: linear warm-up to ``lr`` over ``warmup`` steps, then constant."""
+    return lr * min(1.0, (step + 1) / max(warmup, 1))
+
+
+def check_finite(loss: torch.Tensor, step: int, what: str = "training") -> None:
+    """Raise PhysmotionError when the loss is NaN or infinite: the run diverged."""
+    if not torch.isfinite(loss):
+        raise PhysmotionError(f"{what} diverged at step {step} (loss {loss.item()})")
 
 
 def batch_indices(n: int, batch: int, seed: int, step: int) -> tuple[int, list[int]]:

@@ -116,16 +116,24 @@ def tiny_model(tiny_model_dir: Path):
     return MotionDiffusion.load(tiny_model_dir)
 
 
+def tiny_evaluator_config(data: Path, out: Path, **kw):
+    """A small evaluator that trains 3 epochs in seconds on 2 CPU cores (an EvaluatorTrainConfig)."""
+    from physmotion.eval.evaluator import EvaluatorConfig
+    from physmotion.eval.train import EvaluatorTrainConfig
+
+    base = {"epochs": 3, "eval_every": 1, "eval_repeats": 2, "lr": 5e-4,
+            "evaluator": EvaluatorConfig(d_model=32, motion_layers=1, text_layers=1, latent_dim=16)}  # fmt: skip
+    base.update(kw)
+    return EvaluatorTrainConfig(data=str(data), out=str(out), **base)
+
+
 @pytest.fixture(scope="session")
 def tiny_evaluator_dir(built_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A small evaluator trained for 3 epochs on the bundled data: real weights, a weak evaluator."""
-    from physmotion.eval.evaluator import EvaluatorConfig
-    from physmotion.eval.train import EvaluatorTrainConfig, train_evaluator
+    from physmotion.eval.train import train_evaluator
 
     out = tmp_path_factory.mktemp("tiny_evaluator") / "evaluator"
-    cfg = EvaluatorTrainConfig(data=str(built_dir), out=str(out), epochs=3, eval_every=1, eval_repeats=2, lr=5e-4,
-                               evaluator=EvaluatorConfig(d_model=32, motion_layers=1, text_layers=1, latent_dim=16))
-    train_evaluator(cfg, progress=False)
+    train_evaluator(tiny_evaluator_config(built_dir, out), progress=False)
     return out
 
 

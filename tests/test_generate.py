@@ -135,3 +135,28 @@ def test_cli_missing_checkpoint(tmp_path: Path) -> None:
     assert res.returncode == 1 and "no model checkpoint" in res.stderr
     assert len(res.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "gen").exists()
+
+
+def test_a_329d_model_projects_in_its_own_features(imported_clips) -> None:
+    """BioMoDiffuse's 329-d features through post and physdiff: P's output is re-extracted as 329-d and
+    normalised with the model's own 329-d statistics (a 263-d re-extraction used to crash here).
+    The denoiser has random weights; its statistics come from real clips."""
+    import torch
+
+    from physmotion.diffusion.denoiser import DenoiserConfig, build_denoiser
+    from physmotion.diffusion.model import MotionDiffusion
+    from physmotion.diffusion.schedule import DiffusionConfig
+    from physmotion.features.biomech import FEATURE_DIM_BIOMECH, extract_features_329
+    from physmotion.features.normalize import Normalizer, compute_mean_std
+
+    clips = [m for m in imported_clips.values() if isinstance(m, Motion)][:12]
+    mean, std = compute_mean_std([extract_features_329(m.joints)[0] for m in clips])
+    den = DenoiserConfig(feature_dim=FEATURE_DIM_BIOMECH, d_model=32, layers=1)
+    torch.manual_seed(0)
+    model = MotionDiffusion(net=build_denoiser(den).eval(), denoiser=den, diffusion=DiffusionConfig(),
+                            normalizer=Normalizer(mean, std), info={"licence_tags": ["NC"]})
+    for mode in ("post:1", "physdiff:end:2,space:1"):
+        out = generate(["a person walks"], _cfg(physics=mode), model)
+        assert out.projections.calls >= 1 and out.features[0].shape == (48, FEATURE_DIM_BIOMECH), mode
+        assert out.motions[0].joints.shape == (48, 22, 3) and out.bodies[0] is not None, mode
+        assert out.motions[0].resets is not None and out.motions[0].resets >= 0

@@ -125,7 +125,7 @@ def _process_clip(info: ClipInfo, config: BuildConfig) -> list[_Item] | str:
     except PhysmotionError as exc:
         return str(exc)
     if motion.num_frames - 1 < config.min_frames:
-        return f"too short: {motion.num_frames} frames at 20 fps, need {config.min_frames + 1}"
+        return f"too short: {motion.num_frames} frames at {FPS} fps, need {config.min_frames + 1}"
     items: list[_Item] = []
     for k, (s, e) in enumerate(windows(motion.num_frames, config.max_frames)):
         if e - s - 1 < config.min_frames:

@@ -10,45 +10,23 @@ attention, so one batch can mix lengths.
 
 Classifier-free guidance: ``drop_text`` (B,) bool replaces a caption by the null condition (no text
 tokens, zero sentence vector), as MDM's ``cond_mask_prob`` does.
+
+The config and the time/text condition live in :mod:`physmotion.diffusion.backbone`, which the UNet
+(:mod:`physmotion.diffusion.unet`) shares; :func:`build_denoiser` builds either backbone.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
 
 import torch
 from torch import nn
 
-from physmotion.conventions import MAX_FRAMES
-from physmotion.features.humanml3d import FEATURE_DIM
+from physmotion.diffusion.backbone import DenoiserConfig, TimeTextCondition
+from physmotion.diffusion.unet import UNetDenoiser
 from physmotion.text.encoder import TextFeatures
 
-
-@dataclass
-class DenoiserConfig:
-    """Shape of a denoiser; stored in every checkpoint."""
-
-    arch: str = "transformer"  # "transformer" (MDM) or "unet" (BioMoDiffuse's 1D UNet)
-    feature_dim: int = FEATURE_DIM
-    text_dim: int = 384
-    d_model: int = 256
-    layers: int = 4
-    heads: int = 4
-    ff_mult: int = 4
-    dropout: float = 0.1
-    max_frames: int = MAX_FRAMES
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-
-def timestep_embedding(t: torch.Tensor, dim: int, max_period: float = 10000.0) -> torch.Tensor:
-    """Sinusoidal embedding of diffusion timesteps t (B,) -> (B, dim), as in DDPM/MDM."""
-    half = dim // 2
-    freqs = torch.exp(-math.log(max_period) * torch.arange(half, device=t.device, dtype=torch.float32) / half)
-    args = t.float()[:, None] * freqs[None]
-    return torch.cat([torch.cos(args), torch.sin(args)], dim=-1)
+__all__ = ["DenoiserConfig", "TransformerDenoiser", "build_denoiser", "positional_encoding"]
 
 
 def positional_encoding(length: int, dim: int) -> torch.Tensor:
@@ -58,27 +36,6 @@ def positional_encoding(length: int, dim: int) -> torch.Tensor:
     table = torch.zeros(length, dim)
     table[:, 0::2], table[:, 1::2] = torch.sin(pos * div), torch.cos(pos * div)
     return table
-
-
-class TimeTextCondition(nn.Module):
-    """Timestep + sentence vector -> one d-dim condition vector; caption tokens -> d-dim tokens."""
-
-    def __init__(self, d_model: int, text_dim: int) -> None:
-        super().__init__()
-        self.d_model = d_model
-        self.time_mlp = nn.Sequential(nn.Linear(d_model, d_model), nn.SiLU(), nn.Linear(d_model, d_model))
-        self.pooled_proj = nn.Linear(text_dim, d_model)
-        self.token_proj = nn.Linear(text_dim, d_model)
-
-    def forward(
-        self, t: torch.Tensor, text: TextFeatures, drop_text: torch.Tensor | None
-    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Returns cond (B, d), tokens (B, L, d), token mask (B, L) with dropped captions masked out."""
-        keep = torch.ones(len(t), dtype=torch.bool, device=t.device) if drop_text is None else ~drop_text
-        cond = self.time_mlp(timestep_embedding(t, self.d_model))
-        cond = cond + self.pooled_proj(text.pooled) * keep[:, None]
-        tokens = self.token_proj(text.tokens) * keep[:, None, None]
-        return cond, tokens, text.mask & keep[:, None]
 
 
 class TransformerDenoiser(nn.Module):
@@ -121,7 +78,5 @@ def build_denoiser(config: DenoiserConfig) -> nn.Module:
     if config.arch == "transformer":
         return TransformerDenoiser(config)
     if config.arch == "unet":
-        from physmotion.diffusion.unet import UNetDenoiser
-
         return UNetDenoiser(config)
     raise ValueError(f"unknown denoiser architecture {config.arch!r} (transformer or unet)")

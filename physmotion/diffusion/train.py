@@ -19,6 +19,7 @@ import json
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -31,7 +32,18 @@ from physmotion.diffusion.schedule import DiffusionConfig, training_scheduler
 from physmotion.errors import PhysmotionError
 from physmotion.motion import write_atomic
 from physmotion.text.encoder import load_text_encoder
-from physmotion.training import batch_indices, bf16_helps, loss_bar, seeded_generator
+from physmotion.training import (
+    batch_indices,
+    bf16_helps,
+    check_finite,
+    loss_bar,
+    seed_dropout,
+    seeded_generator,
+    warmup_lr,
+)
+
+if TYPE_CHECKING:
+    from accelerate import Accelerator
 
 STATE_FILE = "train_state.pt"
 LOSS_FILE = "loss.csv"
@@ -76,9 +88,22 @@ def masked_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> 
     return ((pred - target) ** 2 * m).sum() / (m.sum() * pred.shape[-1]).clamp_min(1.0)
 
 
-def train_denoiser(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> TrainResult:
-    """Train (or resume training) a text-to-motion denoiser on a HumanML3D-layout folder."""
+def _accelerator(cpu: bool, bf16: bool) -> Accelerator:
+    """An Accelerator for one run. Accelerate keeps one state per process and refuses a second run with
+    another precision; outside ``accelerate launch`` (one process) each run may start from a fresh one."""
     from accelerate import Accelerator
+    from accelerate.state import AcceleratorState, DistributedType
+
+    if AcceleratorState._shared_state and AcceleratorState().distributed_type == DistributedType.NO:
+        AcceleratorState._reset_state(reset_partial_state=True)  # private, but the only way to reset
+    return Accelerator(cpu=cpu, mixed_precision="bf16" if bf16 else "no")
+
+
+def train_denoiser(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> TrainResult:
+    """Train (or resume training) a text-to-motion denoiser on a HumanML3D-layout folder.
+
+    ``cfg`` is not changed: what the run decides (the text and feature widths, bf16) goes into the copy
+    that is saved with it."""
     from diffusers.training_utils import EMAModel
 
     out = Path(cfg.out)
@@ -94,10 +119,11 @@ def train_denoiser(cfg: TrainConfig, resume: bool = False, progress: bool = True
     # step 7904 the shipped model's run passed the crop as max_frames, which dropped the longer ones.)
     dataset = MotionDataset(cfg.data, "train", crop=cfg.crop, random_crop=cfg.random_crop, seed=cfg.seed)
     encoder = load_text_encoder(cfg.text_encoder)
-    cfg.denoiser.text_dim, cfg.denoiser.feature_dim = encoder.dim, dataset.normalizer.dim
+    denoiser = replace(cfg.denoiser, text_dim=encoder.dim, feature_dim=dataset.normalizer.dim)
+    cfg = replace(cfg, denoiser=denoiser)
     if cfg.bf16 is None:
         cfg = replace(cfg, bf16=bf16_helps(cfg.device))  # saved as decided
-    accel = Accelerator(cpu=cfg.device == "cpu", mixed_precision="bf16" if cfg.bf16 else "no")
+    accel = _accelerator(cfg.device == "cpu", cfg.bf16)
     torch.manual_seed(cfg.seed)
     net = build_denoiser(cfg.denoiser)
     opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
@@ -112,9 +138,6 @@ def train_denoiser(cfg: TrainConfig, resume: bool = False, progress: bool = True
     net, opt = accel.prepare(net, opt)
     ema.to(accel.device)
     noise_sched = training_scheduler(cfg.diffusion)
-
-    def lr_at(s: int) -> float:
-        return cfg.lr * min(1.0, (s + 1) / max(cfg.warmup, 1))
 
     def save() -> None:
         _save(cfg, out, accel.unwrap_model(net), opt, ema, step, losses, dataset)
@@ -134,14 +157,13 @@ def train_denoiser(cfg: TrainConfig, resume: bool = False, progress: bool = True
         noise = torch.randn(x0.shape, generator=g)
         drop = torch.rand(len(idx), generator=g) < cfg.text_drop
         xt = noise_sched.add_noise(x0.cpu(), noise, t).to(accel.device)
-        torch.manual_seed(int(torch.randint(0, 2**31 - 1, (1,), generator=g)))  # dropout masks of this step
+        seed_dropout(g)  # dropout masks of this step
         for group in opt.param_groups:
-            group["lr"] = lr_at(step)
+            group["lr"] = warmup_lr(cfg.lr, cfg.warmup, step)
         with accel.autocast():
             pred = net(xt, t.to(accel.device), text, mask, drop.to(accel.device))
         loss = masked_mse(pred.float(), x0, mask)
-        if not torch.isfinite(loss):
-            raise PhysmotionError(f"training diverged at step {step} (loss {loss.item()})")
+        check_finite(loss, step)
         opt.zero_grad(set_to_none=True)
         accel.backward(loss)
         accel.clip_grad_norm_(net.parameters(), cfg.grad_clip)

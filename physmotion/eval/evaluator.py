@@ -38,7 +38,7 @@ from physmotion.diffusion.denoiser import positional_encoding
 from physmotion.errors import PhysmotionError, ShapeError
 from physmotion.features.humanml3d import FEATURE_DIM
 from physmotion.features.normalize import Normalizer
-from physmotion.text.encoder import DEFAULT_ENCODER, TextFeatures, load_text_encoder
+from physmotion.text.encoder import DEFAULT_ENCODER, MINILM_DIM, TextFeatures, load_text_encoder
 
 DEFAULT_EVALUATOR_DIR = Path(__file__).resolve().parent.parent / "models" / "evaluator"
 CONTACT_DIMS = 4  # the last 4 of the 263: foot contacts
@@ -50,7 +50,7 @@ class EvaluatorConfig:
     and FID's covariance from so few samples is only meaningful in a low-dimensional space."""
 
     feature_dim: int = FEATURE_DIM
-    text_dim: int = 384
+    text_dim: int = MINILM_DIM
     text_encoder: str = DEFAULT_ENCODER
     latent_dim: int = 64
     d_model: int = 128

@@ -13,9 +13,8 @@ import numpy as np
 
 from physmotion.io.importer import ClipInfo, import_clip, load_manifest
 from physmotion.metrics import physical_metrics
-from physmotion.physics.humanoid import body_from_joints, foot_lift
 from physmotion.physics.projection import ProjectedMotion, ProjectionConfig, project
-from physmotion.physics.surface import HumanoidSurface
+from physmotion.physics.surface import HumanoidSurface, ground_on_surface
 from physmotion.physics.workers import map_in_workers
 
 LOCOMOTION = re.compile(r"\b(walk|walks|walking|run|runs|running|jog|jogs|jogging)\b")
@@ -30,7 +29,8 @@ def locomotion_clips(mocap_dir: str | Path) -> list[ClipInfo]:
 @dataclass
 class ClipProjection:
     """One projected clip: P's result and the physical metrics of its input and of the simulation, both
-    on the humanoid's geometry of the clip's own body (the input raised by the sole depth, as P does)."""
+    on the humanoid's geometry of the clip's own body, under the metrics' floor convention (the input
+    grounded on that surface, :func:`ground_on_surface`; the simulation as it is)."""
 
     result: ProjectedMotion
     before: dict[str, float]
@@ -42,10 +42,9 @@ def measure_projection(
 ) -> ClipProjection:
     """Project ``joints`` (T, 22, 3), data convention, at ``fps`` and measure input and output."""
     result = project(joints, fps, config)
-    body = body_from_joints(joints)
+    grounded, body = ground_on_surface(joints)
     surface = HumanoidSurface(body)
-    raised = joints + np.array([0, foot_lift(body), 0], np.float32)
-    before = physical_metrics(raised, fps=fps, body=surface)
+    before = physical_metrics(grounded, fps=fps, body=surface)
     after = physical_metrics(result.simulated, fps=fps, body=surface)
     return ClipProjection(result, before, after)
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 import copy
 import json
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +27,14 @@ from physmotion.eval.evaluator import Evaluator, EvaluatorConfig, EvaluatorNet, 
 from physmotion.eval.retrieval import BATCH, retrieval
 from physmotion.motion import write_atomic
 from physmotion.text.encoder import load_text_encoder
-from physmotion.training import batch_indices, loss_bar, seeded_generator
+from physmotion.training import (
+    batch_indices,
+    check_finite,
+    loss_bar,
+    seed_dropout,
+    seeded_generator,
+    warmup_lr,
+)
 
 LOSS_FILE = "loss.csv"
 
@@ -61,7 +68,9 @@ class EvaluatorTrainResult:
 
 
 def train_evaluator(cfg: EvaluatorTrainConfig, progress: bool = True) -> EvaluatorTrainResult:
-    """Train an evaluator on ``cfg.data``'s train split and write it to ``cfg.out``."""
+    """Train an evaluator on ``cfg.data``'s train split and write it to ``cfg.out``.
+
+    ``cfg`` is not changed: the text and feature widths the run takes from its data go into a copy."""
     out = Path(cfg.out)
     if (out / "model.safetensors").is_file():
         raise PhysmotionError(f"{out} already holds a model: choose another --out")
@@ -71,7 +80,8 @@ def train_evaluator(cfg: EvaluatorTrainConfig, progress: bool = True) -> Evaluat
         raise PhysmotionError(f"{cfg.data}: the train split has {len(dataset)} motions, fewer than a batch")
     val_items = _items_or_none(cfg.data, "val", c.max_frames, cfg.batch_size)
     encoder = load_text_encoder(c.text_encoder)
-    c.text_dim, c.feature_dim = encoder.dim, dataset.normalizer.dim
+    c = replace(c, text_dim=encoder.dim, feature_dim=dataset.normalizer.dim)
+    cfg = replace(cfg, evaluator=c)
     torch.manual_seed(cfg.seed)
     net = EvaluatorNet(c).to(cfg.device)
     evaluator = Evaluator(net, c, dataset.normalizer, _info(cfg, len(dataset)))
@@ -92,15 +102,14 @@ def train_evaluator(cfg: EvaluatorTrainConfig, progress: bool = True) -> Evaluat
         text = encoder.encode(batch["text"])
         x = batch["motion"][..., : c.motion_in].to(cfg.device)
         g = seeded_generator(cfg.seed, 2, step)
-        torch.manual_seed(int(torch.randint(0, 2**31 - 1, (1,), generator=g)))  # this step's dropout masks
+        seed_dropout(g)  # this step's dropout masks
         for group in opt.param_groups:
-            group["lr"] = cfg.lr * min(1.0, (step + 1) / max(cfg.warmup, 1))
+            group["lr"] = warmup_lr(cfg.lr, cfg.warmup, step)
         t_emb = net.embed_text(text.to(cfg.device))
         m_emb = net.embed_motion(x, batch["mask"].to(cfg.device))
         caption_sim = (text.pooled @ text.pooled.T).to(cfg.device)
         loss = contrastive_loss(t_emb, m_emb, caption_sim, c.temperature, c.filter_threshold)
-        if not torch.isfinite(loss):
-            raise PhysmotionError(f"evaluator training diverged at step {step} (loss {loss.item()})")
+        check_finite(loss, step, "evaluator training")
         opt.zero_grad(set_to_none=True)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(net.parameters(), cfg.grad_clip)

@@ -470,7 +470,8 @@ def mirror_features(features: Array) -> Array:
     """
     dim = features.shape[-1] if hasattr(features, "shape") else None
     if dim not in _MIRROR:
-        raise ShapeError(f"features must have last dimension 263 or 329, got {dim}")
+        dims = " or ".join(str(d) for d in _MIRROR)
+        raise ShapeError(f"features must have last dimension {dims}, got {dim}")
     ops = _ops_for(features, 1, min_ndim=1)
     index, sign = _MIRROR[dim]
     if ops.torch:

@@ -118,7 +118,8 @@ def compute_mean_std(
     for i, arr in enumerate(feature_arrays):
         arr = np.asarray(arr)
         if arr.ndim != 2 or arr.shape[-1] not in _GROUPS:
-            raise ShapeError(f"feature array {i} must have shape (T, 263) or (T, 329), got {arr.shape}")
+            want = f"(T, {FEATURE_DIM}) or (T, {FEATURE_DIM_BIOMECH})"
+            raise ShapeError(f"feature array {i} must have shape {want}, got {arr.shape}")
         if np.isnan(arr).any():
             warnings.warn(f"feature array {i} contains NaN; skipped", stacklevel=2)
             continue

@@ -14,7 +14,7 @@ from physmotion.metrics.generation import (
 from physmotion.metrics.geometry import DEFAULT_BODY, BodyGeometry, BodySurface, lowest_surface_height
 from physmotion.metrics.physical import (
     METRICS,
-    MIN_FRAMES,
+    METRIC_MIN_FRAMES,
     PARAMS,
     MetricInfo,
     MetricParams,
@@ -39,7 +39,7 @@ from physmotion.metrics.physical import (
 )
 
 __all__ = [
-    "DEFAULT_BODY", "METRICS", "MIN_FRAMES", "PARAMS", "BodyGeometry", "BodySurface", "MetricInfo",
+    "DEFAULT_BODY", "METRICS", "METRIC_MIN_FRAMES", "PARAMS", "BodyGeometry", "BodySurface", "MetricInfo",
     "MetricParams", "acceleration_consistency", "clip_ratio", "confidence_interval", "diversity",
     "embedding_stats", "fid", "float_", "float_ratio", "format_table", "frechet_distance",
     "imitation_failure_rate", "lowest_surface_height", "mpjpe", "multimodality", "multimodality_per_text",

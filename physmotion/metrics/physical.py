@@ -33,7 +33,7 @@ from physmotion.errors import ShapeError
 from physmotion.metrics.geometry import DEFAULT_BODY, BodySurface
 from physmotion.skeleton import FOOT_JOINTS, JOINT_INDEX, NUM_JOINTS
 
-MIN_FRAMES = 4
+METRIC_MIN_FRAMES = 4
 """Fewest frames a motion needs: Smoothness takes a third difference."""
 
 _HORIZONTAL = [a for a in range(3) if a != UP_AXIS]
@@ -49,7 +49,7 @@ class MetricParams:
     # Skate and PFC sum per-frame displacements, so they depend on the frame rate; they are expressed per
     # frame at this rate (displacement * fps / reference_fps): the published values are at 20 fps
     # (HumanML3D). EDGE's own AIST++ numbers are at 30 fps: pass reference_fps=30 to compare with them.
-    reference_fps: float = 20.0
+    reference_fps: float = float(FPS)
     pfc_scale: float = 1e4  # EDGE prints mean * 10000
     # Below this peak root acceleration (m/s^2) a motion counts as not accelerating: EDGE divides by the
     # motion's own maximum, which would blow rounding noise of a constant-velocity root up to O(1).
@@ -213,8 +213,10 @@ def _prepare(
     if not (np.isfinite(fps) and fps > 0):
         raise ShapeError(f"fps must be a positive number, got {fps}")
     lens = _lengths(arr.shape[:2], lengths, mask)
-    if lens.min() < MIN_FRAMES:
-        raise ShapeError(f"{name}: each motion needs at least {MIN_FRAMES} frames, got {int(lens.min())}")
+    if lens.min() < METRIC_MIN_FRAMES:
+        raise ShapeError(
+            f"{name}: each motion needs at least {METRIC_MIN_FRAMES} frames, got {int(lens.min())}"
+        )
     b, t = arr.shape[:2]
     last = np.minimum(np.arange(t)[None, :], lens[:, None] - 1)
     arr = arr[np.arange(b)[:, None], last]  # padding repeats the last valid frame
@@ -389,12 +391,9 @@ def skate(joints: np.ndarray, fps: float = FPS, *, lengths: Lengths = None, mask
     sliding at 0.3 m/s scores 15 mm at any input rate. Frame pairs of all motions pooled.
 
     This follows PhysDiff's text (App. A: "foot joints that contact the ground ... their average
-    horizontal displacement"). CLoSD's code counts, per frame pair, only the joint lowest by its joint
-    height, in the data convention (floor at the motion's lowest joint). On 32 generated motions
-    (2026-11-24) that reads 1.9 mm unprojected and 0.7 mm after PhysDiff, the scale of PhysDiff's
-    published Skate (MDM 1.41, PhysDiff 0.51 mm), against 24.8 / 8.0 mm here: a joint height within
-    5 mm of the motion's lowest finds contact in few frames. The lowest foot joint by contact patch
-    instead reads 29.0 / 7.7 mm; not kept as a metric.
+    horizontal displacement"), not CLoSD's code, which counts per frame pair only the joint lowest by
+    its joint height (floor at the motion's lowest joint), finds contact in few frames and so reads far
+    lower (docs/decisions.md: "PhysDiff Skate as its text says, not as CLoSD's code").
     """
     return _one("skate", joints, fps, lengths, mask, body, params)
 

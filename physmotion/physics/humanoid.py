@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from physmotion.conventions import FPS
 from physmotion.errors import ShapeError
 from physmotion.physics.frames import to_mujoco
 from physmotion.skeleton import (
@@ -70,12 +71,12 @@ class PDGain:
 def default_gains() -> dict[str, PDGain]:
     """Gains per joint group.
 
-    PHC/SMPLSim's SMPL humanoid gains (hip/knee/spine kp 250-500, ankle 150-300, toe ~100, kv = kp/10
-    or less) let this body fall forward in ~2 s under a PD hold (measured, shared/notes/
-    tracking-controller.md §1: toppling stiffness m g h ~ 620 N m/rad beats the ankles'). The gains
-    below are the ones that stood there. kv = kp / 10 throughout. Torque limits: half a radian of
-    error for the legs and spine (the ankle's 1000 N m is far above a human's ~200 N m: it keeps the
-    PD-only body upright, a balance controller should lower it), one radian for the upper body.
+    Stiffer than PHC/SMPLSim's SMPL humanoid gains (hip/knee/spine kp 250-500, ankle 150-300, toe ~100),
+    under which this body falls forward in ~2 s under a PD hold: gravity's toppling stiffness m g h
+    (~620 N m/rad) beats the ankles' (docs/decisions.md: "PD gains stiffer than PHC's"). kv = kp / 10
+    throughout. Torque limits: half a radian of error for the legs and spine (the ankle's 1000 N m is
+    far above a human's ~200 N m: it keeps the PD-only body upright, a balance controller should lower
+    it), one radian for the upper body.
     """
     return {
         "hip": PDGain(1000.0, 100.0, 500.0),
@@ -131,14 +132,10 @@ def default_limits() -> dict[str, tuple[Range, Range, Range]]:
 def default_hinge_order() -> dict[str, str]:
     """Nesting order of the three hinges per group (= the intrinsic Euler sequence, outermost first).
 
-    The middle axis gimbal-locks at +-90 degrees, so it must be an axis of small range. Chosen on the
-    Bandai mocap (300 clips, 29 min at 20 fps, retargeted with each clip's own body) by the largest
-    middle angle seen over all six orders. With the final retargeting (99.9th percentile / max,
-    degrees): hip yzx (twist in the middle) 52/62; knee yzx 4/8; ankle yxz (ISB-like: flexion,
-    inversion, rotation) 13/18; spine yxz 21/36; neck yxz 10/23; collar zyx 8/13; shoulder zyx 59/62;
-    elbow zyx 42/65. Orders with the large axis in the middle (legs: y; arms hanging down: x) went
-    through the lock (middle angles past 90). Leaf joints (foot, head, wrist) have no child: IK leaves
-    them at 0, they follow their parent.
+    The middle axis gimbal-locks at +-90 degrees, so it must be an axis of small range: per group, the
+    order whose middle angle stays smallest on retargeted real mocap (docs/decisions.md: "hinge orders
+    by the largest middle angle"). Leaf joints (foot, head, wrist) have no child: IK leaves them at 0,
+    they follow their parent.
     """
     legs = "yzx"
     trunk = "yxz"
@@ -186,11 +183,9 @@ DEFAULT_EXCLUDES: tuple[tuple[str, str], ...] = (
 class HumanoidConfig:
     """Everything that defines the simulated humanoid and its clocks, in one place.
 
-    ``armature_feet``: the foot subtree is light (~1 kg, 0.013 kg m^2 about the ankle's roll axis), so
-    with ankle kp 2000 its PD frequency is ~3.3 / sim step at 1/120 s; MuJoCo's implicitfast treats kv
-    implicitly but kp explicitly, and with armature 0.01 the standing body buzzed on its feet and fell
-    after ~2 s (it stood at 1/240 s). 0.03 on ankle and toe hinges stood still (1 mm drop, 0.1 deg in
-    6 s) and 8/8 with random 0.05 rad/s joint velocities (measured when this was written).
+    ``armature_feet``: the foot subtree is light (~1 kg) and the ankle stiff, and MuJoCo's implicitfast
+    integrates kp explicitly: with the 0.01 of the other hinges the standing body buzzed on its feet and
+    fell (docs/decisions.md: "armature 0.03 on ankle and toe hinges").
     """
 
     # 360 Hz: the stiff ankle and contact need the small step (240 Hz tracks worse; docs/decisions.md:
@@ -293,7 +288,7 @@ def body_scale(offsets: np.ndarray) -> float:
     return float(np.linalg.norm(offsets, axis=-1).sum() / np.linalg.norm(REST_OFFSETS, axis=-1).sum())
 
 
-def body_from_joints(joints: np.ndarray, fps: float = 20.0) -> np.ndarray:
+def body_from_joints(joints: np.ndarray, fps: float = float(FPS)) -> np.ndarray:
     """Rest offsets (22, 3) of the humanoid that fits a motion: its bone lengths, and feet that stand flat.
 
     joints: (T, 22, 3) metres, Y up. Bone lengths and the hip/shoulder layout come from

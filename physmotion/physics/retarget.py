@@ -166,10 +166,9 @@ def _euler_to_matrix(angles: np.ndarray, seq: str) -> np.ndarray:
 # Knees (None): the twist needed is small; a knee bent "backwards" is hyperextension, so the axis line
 # is kept and flipped rather than the thigh turned by half a turn (the twist stays within 90 degrees).
 # Arms: a raised arm needs any twist (arm forward: the elbow bends upwards, a quarter turn from the
-# swing's frame), and all of it in the shoulder sends the shoulder's Euler angles through gimbal lock
-# (middle angle up to 99 degrees in every order on Bandai). The twist is unwrapped over time and
-# clipped to 50 degrees, the rest stays in the elbow: middle angles then peak at 62 (shoulder) and
-# 65 (elbow) degrees on Bandai, and the elbow is mostly its flexion hinge.
+# swing's frame), and all of it in the shoulder sends the shoulder's Euler angles through gimbal lock.
+# The twist is unwrapped over time and clipped to 50 degrees, the rest stays in the elbow, which is then
+# mostly its flexion hinge (docs/decisions.md: "upper-arm twist clipped to 50 degrees").
 _LIMBS: tuple[tuple[str, str, tuple[float, float, float], float | None], ...] = (
     ("left_hip", "left_knee", (1.0, 0.0, 0.0), None),
     ("right_hip", "right_knee", (1.0, 0.0, 0.0), None),

@@ -2,41 +2,19 @@
 
 Corrections of a retargeted reference (qpos at the control rate), each measured on all 203
 walking/running clips of the bundled mocap (bench/projection_quality.py) and on the issue's test
-motions (tests/physics/test_projection.py):
+motions (tests/physics/test_projection.py); the figures, and the alternatives measured against them,
+are in docs/decisions.md:
 
-- :func:`to_floor` raises a frame whose geometry dips under the floor. Otherwise the stiff legs
-  press the feet toward targets under the floor and launch the body (Bandai walks: soles 12 mm under
-  the floor on average; the humanoid was airborne in 65 % of the control steps and fell). A reference
-  that floats for a second or more is first lowered onto the floor.
-- :func:`swing_clearance` lifts a moving swing foot 3 cm further from the floor. Mocap toes clear
-  the floor by about 1.5 cm in mid-swing, and a simulated body a few degrees off its reference (the
-  pelvis pitched 2 degrees forward lowers a swing foot by ~1.3 cm) scuffs the floor, lands short and
-  is then dragged to its target while loaded: the feet of a slow walk ended 25 cm behind their
-  reference and slid at 0.5 m/s in stance. Over all clips (root residual up to 0.5 W then), lifting
-  each swing foot by its own height (up to 3 cm) cut Skate from 17.3 to 12.8 mm (input 14.1) and the
-  MPJPE from 57.9 to 47.1 mm, with success from 97.5 to 99.5 %; a fixed 3 cm did better still
-  (100 %, 39 mm, Skate 10.7 mm) and also lifts the feet that generated motions drag along the floor
-  (their Phys-Err under P: 20.4 -> 18.5 mm on 16 prompts). Only while the other foot is on the floor
-  (in a run's flight phase it raised Float) and only for a foot that moves (lifting the hovering feet
-  of a bow made them creep: Skate of a standing bow 2.6 -> 5.4 mm).
-- Support by speed (``stance_by_speed``): generated motions often dip the swing foot under the floor,
-  so grounding lifts the frame by it and the slow stance foot hangs centimetres up; the rule above then
-  saw no support and lifted nothing, and the tracker dragged the swing toe along the floor (a generated
-  walk: toe in contact, sliding at 0.6-0.9 m/s for 0.6 s). Such a swing foot is now lifted above the
-  stance foot and the frame lowered onto it. Projecting 96 generated motions once (32 prompts x 3 seeds,
-  step-7904 model): Skate 9.62 -> 7.76 mm, Phys-Err 15.68 -> 13.95 mm, MPJPE 102 -> 72 mm. The 203
-  captured walks/runs hardly have such frames: 99.0 % tracked at 47.9 mm, Phys-Err 16.65 mm, against
-  99.5 % at 49.5 mm and 16.74 mm without it (same run).
-  Tried and not kept (the same 96 motions; runs differ by about 0.5 mm): taking the slip out of stance
-  feet (the sole's slip summed over each stance, the ankle moved against it by IK): Phys-Err 14.21 mm
-  for 70 % more projection time; a 4.5 cm clearance (32 of them): Skate -0.6, Float +0.7 mm;
-  smoothing the grounding's raise over 0.1 / 0.2 s: 13.56 / 14.90 mm; a ``clearance_speed`` of
-  0.35 / 0.25 m/s: 13.79 / 14.51 mm; bounding the centre of mass's downward acceleration to 0.8 /
-  0.6 g (least squares on the root height, stance feet kept down by the leg IK; the generated runs'
-  references fall faster than g in 25-31 % of their frames): 14.14 / 13.82 mm. Grounding a foot that
-  dips under the floor by bending its leg (the ankle lifted by the leg IK) instead of raising the whole
-  frame, so that the root keeps its dip in stance: 14.33 mm; on the 38 captured runs Float 20.5 ->
-  15.5 mm but Skate 8.4 -> 12.6 mm (ankle kp 5000 in both; the captures themselves float 3.2 mm).
+- :func:`to_floor` raises a frame whose geometry dips under the floor, since the stiff legs would press
+  the feet toward targets under the floor and launch the body; a reference that floats for a second or
+  more is first lowered onto the floor (docs/decisions.md: "reference raised out of the floor").
+- :func:`swing_clearance` lifts a moving swing foot 3 cm further from the floor while the other foot is
+  on it: mocap toes clear the floor by only about 1.5 cm in mid-swing, and a body a few degrees off its
+  reference scuffs the floor with them (docs/decisions.md: "swing-foot clearance of a fixed 3 cm").
+- Support by speed (``stance_by_speed``): a generated swing foot that dips under the floor makes
+  grounding raise the frame, and the slow stance foot then hangs centimetres up; such a swing foot is
+  lifted above the stance foot and the frame lowered onto it (docs/decisions.md: "support found by
+  speed").
 
 MPJPE and the metrics are always measured against the unshaped input.
 """
@@ -89,9 +67,8 @@ def to_floor(model, qpos: np.ndarray, dt: float, float_window: float) -> np.ndar
     A motion that does not touch the floor at any instant within ``float_window`` (centred on a frame)
     is taken to float, not to jump: a jump's flight lasts well under a second. It is lowered by the
     least height it keeps over that window (a running minimum, smoothed over 0.1 s), so that it stands
-    on the floor. Measured: a walk lifted 10 cm was tracked while the root PD kept pulling the body up
-    toward it, and it hopped (Float 75.5 -> 7.8 mm); lowered first, 0.8 mm (test_projection.py). The
-    jumps of the bundled mocap and all walking/running clips project as before. 0: never lowered.
+    on the floor: tracked floating, the body hops as the root PD pulls it up toward the reference
+    (docs/decisions.md: "reference raised out of the floor"). 0: never lowered.
     """
     out = qpos.copy()
     out[:, 2] += _floor_shift(_Geometry(model, qpos).lowest, dt, float_window)

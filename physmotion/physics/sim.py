@@ -1,18 +1,17 @@
-"""The simulation core: run a controller along a reference, one motion or many at once.
+"""The simulation core: run a controller along a reference, one episode at a time.
 
 One closed-loop episode is a Python loop over control steps (30 Hz) of ``substeps`` ``mj_step`` calls
-(360 Hz in the projection). :func:`simulate_batch` runs episodes of any controller on a thread pool, one
-``MjData`` per episode (``mj_step`` releases the GIL); the projection instead runs each motion whole in a
-worker process (physics/workers.py), since its Python holds the GIL. ``mujoco.rollout`` cannot be used
-because the controller is closed-loop (the root PD reads the state), see shared/notes/tracking-controller.md
-§4. ``bench/physics.py`` compares raw stepping with the projection.
+(360 Hz in the projection), on its own ``MjData``. A batch of motions is the projection's business: it
+runs each motion whole in a worker process (:mod:`physmotion.physics.workers`), since the controller's
+Python holds the GIL. ``mujoco.rollout`` cannot be used: it steps a fixed, open-loop control sequence,
+and this controller is closed-loop (the root residual's PD reads the simulated state at every step);
+docs/decisions.md: "worker processes for a batch of motions". ``bench/physics.py`` compares raw
+stepping with the projection.
 """
 
 from __future__ import annotations
 
 import math
-import os
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -159,28 +158,4 @@ def simulate(
 def _mpjpe(data, lay, target: np.ndarray) -> float:
     """Mean distance (m) of the 22 skeleton bodies to ``target`` (22, 3), MuJoCo frame."""
     return float(np.mean(np.linalg.norm(data.xpos[lay.body_ids] - target, axis=-1)))
-
-
-def simulate_batch(
-    jobs: list[tuple[object, Reference, Controller]],
-    config: HumanoidConfig | None = None,
-    fail_mpjpe: float = 0.5,
-    threads: int = 0,
-    reset_on_fail: bool = False,
-    follow_drift: bool = False,
-) -> list[Rollout]:
-    """:func:`simulate` for many (model, reference, controller) triples on a thread pool.
-
-    Results are in input order and equal the one-by-one results exactly (each episode has its own
-    MjData; nothing is shared but read-only models).
-    """
-    threads = threads or os.cpu_count() or 1
-    if threads == 1 or len(jobs) == 1:
-        return [simulate(m, r, c, config, fail_mpjpe, reset_on_fail, follow_drift) for m, r, c in jobs]
-
-    def run(job: tuple[object, Reference, Controller]) -> Rollout:
-        return simulate(*job, config, fail_mpjpe, reset_on_fail, follow_drift)
-
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        return list(pool.map(run, jobs))
 

@@ -8,7 +8,8 @@ The model-based tracker needs no training. At each control step (30 Hz by defaul
   limits disabled), after the part of the root wrench that the feet can carry has been given to
   them: min-norm foot forces in a friction pyramid (NNLS) at the foot-box corners that touch the
   floor in the reference. ``mj_inverse`` with contacts on is useless here: the soft contact model
-  turns small reference penetrations into huge forces (shared/notes/tracking-controller.md §5);
+  turns small reference penetrations into huge forces, and a feed-forward built on them pushes the
+  body up (docs/decisions.md: "inverse dynamics without contacts, foot forces split out");
 - a residual root wrench (RFC, PhysDiff's action space): what the feet could not explain, plus a PD
   pull of the pelvis toward the reference, clipped to ``residual_force`` x body weight and
   ``residual_torque`` x body weight x 1 m. Kept small so that the body cannot float or sink.

@@ -1,9 +1,9 @@
 """Worker processes for batches of motions: each motion's projection runs whole in one process.
 
 The tracker is Python at the simulation rate and holds the GIL, and so do retargeting and reference
-shaping, so threads gain little on a batch; processes use every core. Measured on 2 cores, 16 generated
-6 s motions: 6.0 s on 2 threads (the thread pool this replaced), 3.3 s on 2 processes, with bit-identical
-results (each motion is simulated on its own, whatever process runs it).
+shaping, so threads gain little on a batch; processes use every core (docs/decisions.md: "worker
+processes for a batch of motions"). Results are bit-identical whichever process runs a motion: each is
+simulated on its own.
 
 The pool is made on first use and kept, so its start-up (about 1 s) is paid once per Python session.
 On Linux it forks, so a user's script needs no ``if __name__ == "__main__"`` guard; elsewhere it uses the

@@ -23,6 +23,7 @@ import torch
 from physmotion.errors import PhysmotionError
 
 DEFAULT_ENCODER = "minilm"
+MINILM_DIM = 384  # width of the default encoder's token and sentence vectors (all-MiniLM-L6-v2)
 MAX_TOKENS = 32  # our captions are short; HumanML3D's are under 30 words
 
 

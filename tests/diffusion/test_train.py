@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import copy
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +43,18 @@ def test_resume_continues_exactly(built_dir: Path, tmp_path: Path) -> None:
     for x, y in zip(a["ema"]["shadow_params"], b["ema"]["shadow_params"]):
         assert torch.equal(x, y)
     assert a["ema"]["optimization_step"] == b["ema"]["optimization_step"]
+
+
+def test_training_leaves_the_callers_config_alone(built_dir: Path, tmp_path: Path) -> None:
+    """The run takes the text and feature widths from its encoder and data, and decides bf16, in a copy:
+    the config passed in is the same after the run, while the saved one holds what was used."""
+    cfg = tiny_config(built_dir, tmp_path / "run", steps=1, bf16=None)
+    cfg = replace(cfg, denoiser=replace(cfg.denoiser, text_dim=1, feature_dim=1))
+    before = copy.deepcopy(cfg)
+    train_denoiser(cfg, progress=False)
+    assert cfg == before
+    model = MotionDiffusion.load(tmp_path / "run")
+    assert (model.denoiser.text_dim, model.denoiser.feature_dim) == (384, 263)
 
 
 def test_resume_and_overwrite_guards(built_dir: Path, tmp_path: Path) -> None:

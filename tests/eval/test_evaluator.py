@@ -1,6 +1,8 @@
 """The evaluator network, its loss, its folder format and its training, on the bundled data."""
 
+import copy
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -46,6 +48,22 @@ def test_training_records_losses_val_and_test_retrieval(tiny_evaluator_dir):
     for key in ("own_captions", "shuffled_captions"):
         r1, r3 = test[key]["R@1"]["mean"], test[key]["R@3"]["mean"]
         assert 0.0 <= r1 <= r3 <= 1.0
+
+
+def test_training_leaves_the_callers_config_alone(built_dir, tmp_path):
+    """The run takes the text and feature widths from its encoder and data in a copy: the config passed
+    in is the same after the run, while the saved evaluator holds what was used."""
+    from physmotion.eval.train import train_evaluator
+    from tests.conftest import tiny_evaluator_config
+
+    cfg = tiny_evaluator_config(built_dir, tmp_path / "evaluator", epochs=1)
+    cfg = replace(cfg, evaluator=replace(cfg.evaluator, text_dim=1, feature_dim=1))
+    before = copy.deepcopy(cfg)
+    result = train_evaluator(cfg, progress=False)
+    assert cfg == before
+    assert (result.evaluator.config.text_dim, result.evaluator.config.feature_dim) == (384, 263)
+    again = Evaluator.load(tmp_path / "evaluator")
+    assert (again.config.text_dim, again.config.feature_dim) == (384, 263)
 
 
 def test_filtered_negatives_leave_the_softmax():

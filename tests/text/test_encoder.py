@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from physmotion.errors import PhysmotionError
-from physmotion.text.encoder import load_text_encoder
+from physmotion.text.encoder import MINILM_DIM, load_text_encoder
 
 
 @pytest.fixture(scope="module")
@@ -16,7 +16,7 @@ def encoder():
 
 def test_shapes_masks_and_pooling(encoder) -> None:
     out = encoder.encode(["a person walks forward", "run"])
-    assert encoder.dim == 384
+    assert encoder.dim == MINILM_DIM == 384
     assert out.tokens.shape[0] == 2 and out.tokens.shape[2] == 384
     assert out.mask.dtype == torch.bool and out.mask[0].all()
     # "run" is [CLS] run [SEP]: three real tokens, zeros after them

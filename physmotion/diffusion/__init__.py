@@ -1,0 +1,1 @@
+"""Text-conditioned motion diffusion: denoiser backbones, noise schedules, samplers, training, PhysDiff."""

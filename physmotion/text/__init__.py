@@ -1,0 +1,1 @@
+"""Frozen text encoders that turn captions into the features the denoiser and the evaluator read."""
