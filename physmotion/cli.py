@@ -158,9 +158,10 @@ def generate_cmd(
     out: Path = typer.Option(Path("out"), "-o", "--out", help="Output folder."),
     seconds: float | None = typer.Option(None, help="Length of each motion in seconds (default: 6)."),
     physics: str | None = typer.Option(
-        None, help="none, none+floor (plain sampling grounded on the body's surface), post[:K] (K projections "
-        "after sampling) or physdiff[:SCHEDULE] (projection inside sampling; SCHEDULE uniform:N, "
-        "start:M,end:N or end:N,space:S) (default: physdiff:end:4,space:1)."),
+        None, help="none, none+floor (plain sampling, shifted onto the floor as well as a constant "
+        "shift can), post[:K] (K projections after sampling) or physdiff[:SCHEDULE] (projection "
+        "inside sampling; SCHEDULE uniform:N, start:M,end:N or end:N,space:S) "
+        "(default: physdiff:end:4,space:1)."),
     num: int | None = typer.Option(None, help="Samples per caption (default: 1)."),
     seed: int | None = typer.Option(None, help="Random seed; the same seed gives the same motions (default: 0)."),
     sampler: str | None = typer.Option(None, help="ddim, ddpm or dpmpp (DPM-Solver++ 2M, Karras) (default: ddim)."),

@@ -3,9 +3,10 @@
 Spellings (``generate --physics``, ``evaluate --physics`` as a comma list, table rows):
 
 - ``none``: plain diffusion sampling, measured as sampled (the papers' baseline);
-- ``none+floor``: plain sampling, then each motion moved up or down so that the body's lowest surface
-  point over the clip touches the floor (:func:`physmotion.physics.surface.ground_on_surface`): the
-  clean-up any user does first, and the fair baseline for the physics modes;
+- ``none+floor``: plain sampling, then each motion moved up or down onto the floor by the constant
+  that leaves it the least Phys-Err on the body's surface
+  (:func:`physmotion.physics.surface.ground_on_surface`): the clean-up any user does first, at its best,
+  and the fair baseline for the physics modes;
 - ``post[:K]``: K applications of P after sampling (default 1), the post-processing baseline;
 - ``physdiff[:SCHEDULE]``: PhysDiff's Algorithm 2, P inside sampling at the steps of SCHEDULE
   (``uniform:N``, ``start:M,end:N`` or ``end:N,space:S``; default ``end:4,space:1``).

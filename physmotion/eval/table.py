@@ -17,7 +17,8 @@ The real row uses HumanML3D's evaluation crops of the real motions (lengths roun
 
 Physical metrics use the humanoid's collision geometry (:class:`HumanoidSurface`) by default, under the
 metrics' floor convention (:mod:`physmotion.metrics.physical`): the real motions are grounded on that
-surface (:func:`ground_on_surface`) as the ``none+floor`` row is; ``none`` is measured as sampled.
+surface (:func:`ground_on_surface`, the constant shift with the least Phys-Err) as the ``none+floor``
+row is; ``none`` is measured as sampled.
 ``reset_rate`` is the share of output motions whose projection put the fallen humanoid back on the motion
 at least once (MPJPE past tau, 0.15 m in generation) and ``resets`` the mean number of those jumps per
 motion. Neither is Morph's imitation failure rate (0.5 m, the input kept: ``metrics.imitation_failure_rate``).
@@ -176,7 +177,7 @@ def evaluate(
             per_text.append(emb)
         rows[mode] = _summarise(runs, np.stack(per_text, axis=1) if cfg.repeats > 1 else None)
     meta = {"split": cfg.split, "motions": len(items), "repeats": cfg.repeats, "modes": list(gen_configs),
-            "model": model.info.get("data", ""), "model_steps": model.info.get("steps"),
+            "model_trained_on": model.info.get("data", ""), "model_steps": model.info.get("steps"),
             "model_licence": model.licence_tag, "evaluator_licence": evaluator.licence_tag,
             "sampler": asdict(cfg.base.sampler),
             "projection": reset_settings(cfg.base.projection),

@@ -6,6 +6,16 @@ Each metric is averaged per its source: PhysDiff's over all frames of the batch 
 the others per motion and then over motions (``MetricInfo.aggregate``). Where a paper leaves a detail
 open, the choice is written in that metric's docstring and in :data:`METRICS`.
 
+The floor: y = 0 is where the body *surface* stands (``surface``: the humanoid's collision geometry of
+:mod:`physmotion.physics.surface` in the tables, or the capsules of :mod:`physmotion.metrics.geometry`),
+not the lowest joint. Motions in the
+data convention (lowest joint at 0) stand about a sole's thickness in the floor by this measure, so the
+tables ground them first with :func:`physmotion.physics.surface.ground_on_surface`, by the constant
+shift that leaves the least Phys-Err (a rigid box foot cannot both stand flat and roll over heel and
+toe on the floor as a real foot does): the real row and the ``none+floor`` mode are grounded that way;
+``none`` is measured as sampled, and P's output is already a simulated body on the simulator's floor
+(docs/decisions.md, "floor convention").
+
 Sources followed (code read, not copied):
 - PhysDiff App. A, as implemented in GuyTevet/CLoSD
   ``closd/diffusion_planner/data_loaders/humanml/utils/metrics.py`` (``calculate_penetration``,

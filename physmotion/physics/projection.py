@@ -23,6 +23,8 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from physmotion.conventions import FPS
 from physmotion.errors import ShapeError
+from physmotion.features.biomech import FEATURE_DIM_BIOMECH, to_263
+from physmotion.features.humanml3d import FEATURE_DIM, recover_from_ric
 from physmotion.physics.humanoid import HumanoidConfig, body_from_joints, build_model, foot_lift
 from physmotion.physics.retarget import joints_to_qpos, qpos_to_joints
 from physmotion.physics.shaping import ShapingConfig, shape_reference
@@ -98,12 +100,9 @@ def as_joints(motion: np.ndarray) -> tuple[np.ndarray, bool]:
     Returns (joints, batched). Raises ShapeError for other shapes, NaN/inf, fewer than 2 frames.
     """
     x = np.asarray(motion)
-    if x.ndim in (2, 3) and x.shape[-1] in (263, 329):
-        from physmotion.features.biomech import to_263
-        from physmotion.features.humanml3d import recover_from_ric
-
+    if x.ndim in (2, 3) and x.shape[-1] in (FEATURE_DIM, FEATURE_DIM_BIOMECH):
         batched = x.ndim == 3
-        feats = x if x.shape[-1] == 263 else to_263(x)
+        feats = x if x.shape[-1] == FEATURE_DIM else to_263(x)
         if not np.all(np.isfinite(feats)):
             raise ShapeError("features contain NaN or infinite values")
         x = recover_from_ric(np.asarray(feats, dtype=np.float64))

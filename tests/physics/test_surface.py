@@ -8,7 +8,8 @@ import pytest
 from physmotion.errors import ShapeError
 from physmotion.physics.humanoid import body_from_joints
 from physmotion.physics.projection import project
-from physmotion.physics.surface import HumanoidSurface
+from physmotion.metrics.physical import physical_metrics
+from physmotion.physics.surface import HumanoidSurface, ground_on_surface
 
 
 def test_heights_follow_the_motion_given_not_a_freed_one(real_walk: np.ndarray) -> None:
@@ -51,3 +52,19 @@ def test_on_the_body_p_simulated_the_surface_agrees_with_mujoco(real_walk: np.nd
     assert contact.mean() > 0.5
     off = np.abs(low[contact])
     assert np.median(off) < 0.0025 and off.mean() < 0.004, 1000 * off
+
+
+def test_grounding_puts_a_captured_walk_on_the_floor(real_walk: np.ndarray) -> None:
+    """The metrics' floor convention: the best constant shift. A captured walk in the data convention
+    (lowest joint at 0) sinks its soles ~2 cm; grounded, it barely penetrates and its Phys-Err is
+    lower than with its lowest surface point over the clip on the floor, where the stance foot floats
+    (the box feet dip their corners at heel strike and toe-off)."""
+    grounded, body = ground_on_surface(real_walk)
+    surface = HumanoidSurface(body)
+    assert grounded.dtype == real_walk.dtype and np.allclose(grounded[..., [0, 2]], real_walk[..., [0, 2]])
+    lowest = real_walk - [0, surface.lowest_height(real_walk.astype(np.float64)).min(), 0]
+    as_data, on_lowest, best = (physical_metrics(j, body=surface) for j in (real_walk, lowest, grounded))
+    assert as_data["penetrate"] > 10 and best["penetrate"] < 2.0
+    assert best["phys_err"] < on_lowest["phys_err"] and best["phys_err"] < as_data["phys_err"]
+    again, _ = ground_on_surface(real_walk, body)
+    np.testing.assert_array_equal(again, grounded)
