@@ -4,8 +4,8 @@ model: one table from one run.
 Usage: python bench/physdiff_quality.py [--model DIR] [--prompts 32] [--seeds 0,1,2] [--json FILE]
 (--json also writes every mode's metrics per seed, e.g. results/physdiff_quality.json, which the README
 quotes and tests/test_results.py checks it against.)
-Rows: none (as sampled), none+floor (each motion moved vertically so the body's lowest surface point over
-the clip touches the floor: the fair baseline), post:1, post:4 (as many projections as PhysDiff's default),
+Rows: none (as sampled), none+floor (each motion moved vertically by the constant shift that leaves it the
+least Phys-Err: the fair baseline), post:1, post:4 (as many projections as PhysDiff's default),
 physdiff:end:4,space:1. Metrics on the humanoid's MuJoCo geometry posed on the joints, with the body P
 simulated for projected outputs (PhysDiff's Penetrate/Float/Skate/Phys-Err, mm), averaged over the seeds.
 "vs none" and "vs none+floor" are the change in Phys-Err; "per seed" gives "vs none+floor" for each seed,
@@ -62,6 +62,8 @@ def main() -> None:
     if args.json:
         meta = {"prompts": len(prompts), "seconds": GenerateConfig().seconds, "seeds": seeds,
                 "model_steps": model.info.get("steps")}
+        runs = [{m: {k: (None if np.isnan(v) else v) for k, v in row.items()} for m, row in run.items()}
+                for run in runs]  # strict JSON: no NaN (the unprojected rows have no fall counts)
         write_atomic(args.json, lambda f: f.write(json.dumps({"meta": meta, "runs": runs}, indent=2)), "w")
 
 

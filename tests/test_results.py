@@ -1,0 +1,119 @@
+"""The figures README.md, results/README.md and the model card quote are the ones results/*.json hold.
+
+The JSON files are written by the commands results/README.md names (``physmotion evaluate``,
+``bench/physdiff_quality.py --json``, ``scripts/schedule_study.py``); a re-run that changes a figure
+fails here until the docs say the new one.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "results"
+PHYSDIFF = "physdiff:end:4,space:1"
+DOCS = {
+    "README": ROOT / "README.md",
+    "results": RESULTS / "README.md",
+    "model card": ROOT / "physmotion" / "models" / "default" / "README.md",
+}
+
+
+def _load(name: str) -> dict:
+    return json.loads((RESULTS / name).read_text())
+
+
+def _change(x: float, base: float) -> str:
+    return f"{100 * (x / base - 1):+.0f} %"
+
+
+def evaluate_quotes() -> list[str]:
+    """The test-split table (results/evaluate_default.json) as the docs quote it."""
+    rows = _load("evaluate_default.json")["rows"]
+    err = {m: rows[m]["phys_err"]["mean"] for m in ("real", "none", "none+floor", "post:1", "post:4", PHYSDIFF)}
+    return [
+        f"real Penetrate {rows['real']['penetrate']['mean']:.1f} mm",
+        f"real {err['real']:.1f}",
+        f"none {err['none']:.1f}",
+        f"none+floor {err['none+floor']:.1f}",
+        f"post:1 {err['post:1']:.1f}",
+        f"post:4 {err['post:4']:.1f}",
+        f"PhysDiff {err[PHYSDIFF]:.1f} ± {rows[PHYSDIFF]['phys_err']['ci95']:.1f} mm",
+        f"{_change(err[PHYSDIFF], err['none'])} vs none",
+        f"{_change(err[PHYSDIFF], err['none+floor'])} vs none+floor",
+        f"FID {rows['none']['FID']['mean']:.3f} -> {rows[PHYSDIFF]['FID']['mean']:.3f}",
+        f"R@3 {rows['none']['R@3']['mean']:.3f} -> {rows[PHYSDIFF]['R@3']['mean']:.3f}",
+        f"reset_rate {rows[PHYSDIFF]['reset_rate']['mean']:.2f}",
+    ]
+
+
+def bench_quotes() -> list[str]:
+    """bench/physdiff_quality.py's table (results/physdiff_quality.json): means over the seeds."""
+    runs = _load("physdiff_quality.json")["runs"]
+    err = {m: float(np.mean([r[m]["phys_err"] for r in runs])) for m in runs[0]}
+    return [
+        f"none {err['none']:.1f}",
+        f"none+floor {err['none+floor']:.1f}",
+        f"post:4 {err['post:4']:.1f}",
+        f"PhysDiff {err[PHYSDIFF]:.1f} mm",
+        f"{_change(err[PHYSDIFF], err['none'])} vs none",
+        f"{_change(err[PHYSDIFF], err['none+floor'])} vs none+floor",
+    ]
+
+
+def schedule_quotes() -> list[str]:
+    """The projection-schedule study (results/schedule_study.json) as results/README.md quotes it."""
+    rows = _load("schedule_study.json")["rows"]
+    counts = [c for c in rows if c != "real"]
+    return [
+        "Phys-Err " + " / ".join(f"{rows[c]['phys_err']['mean']:.1f}" for c in counts) + " mm",
+        "FID " + " / ".join(f"{rows[c]['FID']['mean']:.3f}" for c in counts),
+    ]
+
+
+QUOTES = {  # which doc quotes which result file
+    ("README", "evaluate"): evaluate_quotes,
+    ("README", "bench"): bench_quotes,
+    ("results", "evaluate"): evaluate_quotes,
+    ("results", "schedule"): schedule_quotes,
+    ("model card", "evaluate"): evaluate_quotes,
+    ("model card", "bench"): bench_quotes,
+}
+
+
+def _section(text: str, source: str) -> str:
+    """The paragraph(s) of a doc that quote ``source``: those naming its file or command."""
+    marker = {"evaluate": "evaluate_default", "bench": "physdiff_quality", "schedule": "schedule_study"}[source]
+    return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
+
+
+@pytest.mark.parametrize(("doc", "source"), list(QUOTES))
+def test_docs_quote_the_results_files(doc: str, source: str) -> None:
+    text = _section(DOCS[doc].read_text(), source)
+    assert text, f"{doc} has no paragraph citing the {source} results"
+    flat = " ".join(text.split())
+    missing = [q for q in QUOTES[doc, source]() if q not in flat]
+    assert not missing, f"{doc} does not quote these {source} figures: {missing}"
+
+
+def test_real_motion_stands_on_the_floor_in_the_results() -> None:
+    """The metrics' floor convention: captured motion, grounded on the body surface, barely sinks."""
+    for name in ("evaluate_default.json", "schedule_study.json"):
+        assert _load(name)["rows"]["real"]["penetrate"]["mean"] < 2.0
+
+
+def test_physdiff_beats_the_grounded_baseline_in_every_seed() -> None:
+    for run in _load("physdiff_quality.json")["runs"]:
+        assert run[PHYSDIFF]["phys_err"] < run["none+floor"]["phys_err"] < run["none"]["phys_err"]
+
+
+@pytest.mark.parametrize("doc", list(DOCS))
+def test_relative_links_exist(doc: str) -> None:
+    path = DOCS[doc]
+    for target in re.findall(r"\]\(([^)#:]+)\)", path.read_text()):
+        assert (path.parent / target).exists(), f"{path.name} links to a missing {target}"
