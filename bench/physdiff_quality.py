@@ -52,7 +52,8 @@ def main() -> None:
     for mode in MODES:
         mean = {k: float(np.mean([r[mode].get(k, np.nan) for r in runs]))
                 for k in (*COLUMNS, "tracked", "reset_rate", "resets", "seconds_per_motion")}
-        per_seed = "/".join(f"{100 * (r[mode]['phys_err'] / r['none+floor']['phys_err'] - 1):+.1f}" for r in runs)
+        per_seed = "/".join(f"{100 * (r[mode]['phys_err'] / r['none+floor']['phys_err'] - 1):+.1f}"
+                            for r in runs)
         changes = [f"{100 * (mean['phys_err'] / base[b] - 1):+.1f}%" for b in ("none", "none+floor")]
         projected = mode.startswith(("post", "physdiff"))
         falls = [f"{100 * mean['tracked']:.0f}%", f"{100 * mean['reset_rate']:.0f}%", f"{mean['resets']:.2f}"]

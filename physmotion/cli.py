@@ -224,19 +224,23 @@ app.add_typer(train_app, name="train")
 def train_denoiser_cmd(
     data: Path = typer.Option(..., help="HumanML3D-layout folder (our build or a real HumanML3D)."),
     out: Path = typer.Option(..., "-o", "--out", help="Run folder: model, train_state.pt, loss.csv."),
-    arch: str | None = typer.Option(None, help="transformer (MDM) or unet (BioMoDiffuse's 1D UNet) (default: transformer)."),
+    arch: str | None = typer.Option(
+        None, help="transformer (MDM) or unet (BioMoDiffuse's 1D UNet) (default: transformer)."),
     d_model: int | None = typer.Option(None, help="Width (default: 256)."),
     layers: int | None = typer.Option(None, help="Transformer layers, or UNet levels (default: 4)."),
     heads: int | None = typer.Option(None, help="Attention heads (default: 4)."),
-    crop: int | None = typer.Option(None, help="Training windows are cropped to at most this many frames (default: 196)."),
+    crop: int | None = typer.Option(
+        None, help="Training windows are cropped to at most this many frames (default: 196)."),
     batch_size: int | None = typer.Option(None, help="Batch size (default: 32)."),
     steps: int | None = typer.Option(None, help="Total optimiser steps (default: 10000)."),
     lr: float | None = typer.Option(None, help="AdamW learning rate (default: 0.0002)."),
     bf16: bool | None = typer.Option(None, "--bf16/--no-bf16", help="bf16 autocast; default: where the "
                                      "hardware has bf16 natively (a CPU without it is ~20x slower)."),
-    device: str | None = typer.Option(None, help="cpu or cuda (multi-GPU: run under `accelerate launch`) (default: cpu)."),
+    device: str | None = typer.Option(
+        None, help="cpu or cuda (multi-GPU: run under `accelerate launch`) (default: cpu)."),
     seed: int | None = typer.Option(None, help="Seed of data order, noise and initialisation (default: 0)."),
-    checkpoint_minutes: float | None = typer.Option(None, help="Minutes between atomic checkpoints (default: 5.0)."),
+    checkpoint_minutes: float | None = typer.Option(
+        None, help="Minutes between atomic checkpoints (default: 5.0)."),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in --out where it stopped."),
 ) -> None:
     """Train a text-to-motion denoiser (DDPM, x0 prediction, EMA, classifier-free text dropout).
@@ -287,7 +291,8 @@ def evaluate_cmd(
     physics: str | None = typer.Option(
         None, help="Comma-separated modes: none, none+floor, post:K, physdiff:<schedule> "
         "(default: none,none+floor,post:1,post:4,physdiff:end:4,space:1)."),
-    repeats: int | None = typer.Option(None, help="Repeated generation runs (95% intervals over them) (default: 3)."),
+    repeats: int | None = typer.Option(
+        None, help="Repeated generation runs (95% intervals over them) (default: 3)."),
     steps: int | None = typer.Option(None, help="Sampling steps (DDIM) (default: 50)."),
     seed: int | None = typer.Option(None, help="Random seed (default: 0)."),
     quick: bool = typer.Option(False, "--quick", help="Smoke run: 32 motions, 2 repeats, 10 steps."),

@@ -131,10 +131,12 @@ def generate(
         joints, bodies = (list(z) for z in zip(*(ground_on_surface(j) for j in joints)))
     motions = [
         Motion(joints=j, fps=FPS, texts=[p], licence_tag=model.licence_tag,
-               source=f"physmotion generate ({mode})", humanoid=b, resets=r if mode.projects and b is not None else None)
+               source=f"physmotion generate ({mode})", humanoid=b,
+               resets=r if mode.projects and b is not None else None)
         for j, p, b, r in zip(joints, prompts, bodies, resets)
     ]
-    return GenerateResult(motions=motions, features=list(feats), projections=projector.log, resets=list(resets))
+    return GenerateResult(motions=motions, features=list(feats), projections=projector.log,
+                          resets=list(resets))
 
 
 def slug(text: str, limit: int = 40) -> str:

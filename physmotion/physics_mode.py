@@ -58,7 +58,9 @@ class PhysicsMode:
             except ValueError:
                 raise PhysmotionError(f"bad physics mode {spec!r}: post takes a count, e.g. post:4") from None
             if not 1 <= count <= MAX_POST_PROJECTIONS:
-                raise PhysmotionError(f"post projections must be between 1 and {MAX_POST_PROJECTIONS}, got {count}")
+                raise PhysmotionError(
+                    f"post projections must be between 1 and {MAX_POST_PROJECTIONS}, got {count}"
+                )
             return cls(POST, projections=count)
         if kind == PHYSDIFF:
             return cls(PHYSDIFF, schedule=arg.replace(" ", ""))

@@ -35,7 +35,8 @@ def _change(x: float, base: float) -> str:
 def evaluate_quotes() -> list[str]:
     """The test-split table (results/evaluate_default.json) as the docs quote it."""
     rows = _load("evaluate_default.json")["rows"]
-    err = {m: rows[m]["phys_err"]["mean"] for m in ("real", "none", "none+floor", "post:1", "post:4", PHYSDIFF)}
+    modes = ("real", "none", "none+floor", "post:1", "post:4", PHYSDIFF)
+    err = {m: rows[m]["phys_err"]["mean"] for m in modes}
     return [
         f"real Penetrate {rows['real']['penetrate']['mean']:.1f} mm",
         f"real {err['real']:.1f}",
@@ -88,7 +89,8 @@ QUOTES = {  # which doc quotes which result file
 
 def _section(text: str, source: str) -> str:
     """The paragraph(s) of a doc that quote ``source``: those naming its file or command."""
-    marker = {"evaluate": "evaluate_default", "bench": "physdiff_quality", "schedule": "schedule_study"}[source]
+    files = {"evaluate": "evaluate_default", "bench": "physdiff_quality", "schedule": "schedule_study"}
+    marker = files[source]
     return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
 
 
