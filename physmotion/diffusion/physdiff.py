@@ -27,6 +27,7 @@ from physmotion.features.biomech import FEATURE_DIM_BIOMECH, extract_features_32
 from physmotion.features.humanml3d import FEATURE_DIM, extract_features, recover_from_ric
 from physmotion.physics.projection import ProjectionConfig, project
 
+
 def reset_settings(config: ProjectionConfig) -> dict[str, bool | float]:
     """How P treats a fall, as recorded with generated files and evaluation tables."""
     return {"reset_on_fail": config.reset_on_fail, "tau": config.tau}

@@ -13,8 +13,8 @@ from physmotion.metrics.generation import (
 )
 from physmotion.metrics.geometry import DEFAULT_BODY, BodyGeometry, BodySurface, lowest_surface_height
 from physmotion.metrics.physical import (
-    METRICS,
     METRIC_MIN_FRAMES,
+    METRICS,
     PARAMS,
     MetricInfo,
     MetricParams,

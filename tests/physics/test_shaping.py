@@ -90,7 +90,7 @@ def test_swing_clearance_lifts_swing_feet_only(walk_qpos) -> None:
     for k, (before, after_q) in enumerate(zip(poses, out)):
         after = pose(after_q)
         for side, other in (("left", "right"), ("right", "left")):
-            (p0, q0, h0), (p1, q1, _) = before[side], after[side]
+            (p0, q0, _), (p1, q1, _) = before[side], after[side]
             moving = np.clip(speed[side][k] / cfg.clearance_speed - 1.0, 0.0, 1.0)
             supported = before[other][2] <= cfg.support
             expected = cfg.clearance * moving if supported else 0.0

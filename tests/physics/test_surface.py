@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from physmotion.errors import ShapeError
+from physmotion.metrics.physical import physical_metrics
 from physmotion.physics.humanoid import body_from_joints
 from physmotion.physics.projection import project
-from physmotion.metrics.physical import physical_metrics
 from physmotion.physics.surface import HumanoidSurface, ground_on_surface
 
 
