@@ -7,20 +7,36 @@ MOCAP ?= ../shared/data/mocap
 BUILD ?= data_build/mocap
 
 $(VENV)/.installed: pyproject.toml
-	test -x $(PY) || python3 -m venv $(VENV)
-	$(PY) -m pip install -q --disable-pip-version-check torch==2.13.0
-	$(PY) -m pip install -q --disable-pip-version-check -e '.[dev]'
+	test -x $(PY) || { echo "creating the virtual environment in $(VENV)"; python3 -m venv $(VENV); }
+	@echo "installing torch 2.13.0 (CPU build; the largest download, a minute or more)"
+	$(PY) -m pip install --progress-bar on --disable-pip-version-check torch==2.13.0
+	@echo "installing physmotion and its dependencies (editable, with [dev])"
+	$(PY) -m pip install --progress-bar on --disable-pip-version-check -e '.[dev]'
 	touch $@
+	@echo "installed: run $(VENV)/bin/physmotion --help"
 
-.PHONY: install demo data test
+.PHONY: install demo data test browser render-png
 install: $(VENV)/.installed
 
 demo: $(VENV)/.installed
-	$(VENV)/bin/physmotion generate "a person walks forward" --seconds 6 --num 2 -o out/demo
+	$(VENV)/bin/physmotion generate "a person walks forward" --seconds 6 --num 2 -o out/demo --overwrite
 
 data: $(VENV)/.installed
-	$(VENV)/bin/physmotion data build --source $(MOCAP) --out $(BUILD)
+	$(VENV)/bin/physmotion data build --source $(MOCAP) --out $(BUILD) --overwrite
 	$(VENV)/bin/physmotion data stats $(BUILD)
 
-test: $(VENV)/.installed
+# tests/test_view.py opens the viewer page in headless Chromium: install it where it is missing.
+browser:
+	command -v chromium >/dev/null || (apt-get update -qq && apt-get install -y -qq chromium)
+
+test: $(VENV)/.installed browser
 	$(PY) -m pytest -q
+
+# docs/render.png (README): a captured walk beside its physics projection, frame 100 of `physmotion render`.
+RENDER_CLIP ?= $(MOCAP)/bandai/Bandai-Namco-Research-Motiondataset-2/data/dataset-2_walk_normal_001.bvh
+render-png: $(VENV)/.installed
+	tmp=$$(mktemp -d) && \
+	$(VENV)/bin/physmotion import $(RENDER_CLIP) -o $$tmp/captured.npz --rig bandai --fps 30 && \
+	$(VENV)/bin/physmotion project $$tmp/captured.npz -o $$tmp/projected.npz && \
+	$(VENV)/bin/physmotion render $$tmp/captured.npz $$tmp/projected.npz --frame 100 --size 400 -o docs/render.png && \
+	rm -rf $$tmp

@@ -12,7 +12,11 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from physmotion.errors import PhysmotionError
+from physmotion.conventions import FPS, MAX_FRAMES, MAX_TEXT_TOKENS, MIN_FRAMES
+from physmotion.errors import PhysmotionError, PhysmotionWarning
+from physmotion.io.rigs import RIGS  # the --rig help lists the tables
+
+HELP = {"help_option_names": ["-h", "--help"]}  # -h everywhere, on the app and every sub-app
 
 app = typer.Typer(
     help="Text-to-motion generation that obeys physics.",
@@ -20,24 +24,62 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
     add_completion=False,
     rich_markup_mode=None,  # help is plain text: "physdiff:end:4" must not become an emoji
+    context_settings=HELP,
 )
-data_app = typer.Typer(help="Build and inspect HumanML3D-layout datasets.", no_args_is_help=True)
+data_app = typer.Typer(help="Build and inspect HumanML3D-layout datasets.", no_args_is_help=True,
+                       context_settings=HELP)  # fmt: skip
 app.add_typer(data_app, name="data")
 console = Console(soft_wrap=True)
+OVERWRITE_HELP = "Replace existing output instead of refusing."
+
+
+def _version(value: bool) -> None:
+    if value:
+        from importlib.metadata import version
+
+        print(f"physmotion {version('physmotion')}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                 help="Print the installed version and exit."),  # fmt: skip
+) -> None:
+    """Text-to-motion generation that obeys physics."""
+
+
+def _check_out(out: Path, overwrite: bool | None = None) -> None:
+    """Refuse, before any work, an output file that exists (unless ``overwrite``) or cannot be written.
+
+    overwrite None: the command has no --overwrite, so the message does not offer one."""
+    from physmotion.paths import check_output
+
+    hint = "delete it or choose another -o" if overwrite is None else "pass --overwrite to replace it"
+    check_output(out, "file", overwrite=bool(overwrite), hint=hint)
+
+
+def _warn(message: str) -> None:
+    """One ``warning: ...`` line on stderr: the CLI's voice for what does not stop the work."""
+    print(f"warning: {message}", file=sys.stderr)
 
 
 @data_app.command("build")
 def data_build(
     source: Path = typer.Option(..., help="Mocap folder with manifest.csv (e.g. ../shared/data/mocap)."),
-    out: Path = typer.Option(..., help="Output folder (HumanML3D layout)."),
+    out: Path = typer.Option(..., "-o", "--out", help="Output folder (HumanML3D layout). An earlier build "
+                             "there is replaced only with --overwrite."),
     exclude_license: list[str] = typer.Option([], "--exclude-license", help="Leave out clips with this licence tag, e.g. NC."),
     seed: int = typer.Option(0, help="Salt of the take -> split assignment."),
     mirror: bool = typer.Option(True, help="Add left/right mirrored copies, as HumanML3D does."),
     jobs: int = typer.Option(0, help="Worker processes (0: one per core)."),
+    overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
     """Import every clip of a mocap collection into a HumanML3D-layout dataset."""
     from physmotion.data.build import BuildConfig, build_dataset
+    from physmotion.paths import check_output
 
+    check_output(out, "folder", overwrite=overwrite)
     config = BuildConfig(exclude_licences=tuple(exclude_license), seed=seed, mirror=mirror, jobs=jobs)
     report = build_dataset(source, out, config, progress=sys.stderr.isatty())
     for clip, reason in sorted(report.skipped.items()):
@@ -45,7 +87,8 @@ def data_build(
     items = ", ".join(f"{k} {v}" for k, v in report.num_items.items())
     console.print(
         f"built {out}: {report.num_clips - len(report.skipped)}/{report.num_clips} clips, "
-        f"{report.minutes:.1f} min of motion; items: {items}",
+        f"{report.minutes:.1f} min of capture ({report.minutes_with_mirrors:.1f} min with mirrored copies); "
+        f"items: {items}",
         highlight=False,
     )
 
@@ -59,11 +102,13 @@ def data_stats(root: Path = typer.Argument(..., help="A HumanML3D-layout folder.
     table = Table(title=f"dataset {root}")
     table.add_column("split")
     table.add_column("motions", justify="right")
-    table.add_column("minutes", justify="right")
+    table.add_column("minutes*", justify="right")
     for split, n in stats.items.items():
         table.add_row(split, str(n), f"{stats.minutes[split]:.1f}")
     table.add_row("all", str(sum(stats.items.values())), f"{stats.total_minutes:.1f}")
     console.print(table)
+    console.print("* minutes count every motion listed, mirrored copies (ids starting with M) included",
+                  highlight=False)
     if stats.licences:
         console.print("licences: " + ", ".join(f"{k} {v}" for k, v in stats.licences.items()))
     top = ", ".join(f"{w} {c}" for w, c in stats.vocabulary.most_common(30))
@@ -72,19 +117,33 @@ def data_stats(root: Path = typer.Argument(..., help="A HumanML3D-layout folder.
 
 @app.command("import")
 def import_motion(
-    path: Path = typer.Argument(..., help="A .bvh or .amc file (an .amc needs --asf)."),
-    out: Path = typer.Option(..., "-o", "--out", help="Output .npz (or .bvh)."),
-    rig: str | None = typer.Option(None, help="Rig table name (see physmotion.io.rigs); guessed if left out."),
+    path: Path | None = typer.Argument(None, help="A .bvh or .amc file (an .amc needs --asf)."),
+    out: Path | None = typer.Option(None, "-o", "--out", help="Output .npz (or .bvh)."),
+    rig: str | None = typer.Option(
+        None, help=f"Rig table: {', '.join(RIGS)}; guessed if left out. '--rig list' describes them."
+    ),
+    mapping: Path | None = typer.Option(
+        None, help="JSON file naming the file's joint for each of our 22 joints, plus optional units, "
+        "up_axis and fps, for a rig without a table (docs/examples/mapping_bandai.json). Flags override it."),
     asf: Path | None = typer.Option(None, help="The skeleton (.asf) of an .amc file."),
     fps: float | None = typer.Option(None, help="True frame rate, where the header is wrong or absent."),
-    up_axis: str | None = typer.Option(None, help="Y or Z, overriding the rig's."),
-    units: str | None = typer.Option(None, help="cm, m, inch or a factor to metres, overriding the rig's."),
+    up_axis: str | None = typer.Option(None, help="Y or Z, overriding the rig's or mapping's."),
+    units: str | None = typer.Option(None, help="cm, m, inch or a factor to metres, overriding the rig's or mapping's."),
 ) -> None:
     """Import one mocap file to the 22-joint skeleton at 20 fps, Y up, floor at 0, facing +Z."""
+    from physmotion.io.rigs import describe_rig
+
+    if rig == "list":
+        for name, table in RIGS.items():
+            console.print(f"{name}: {describe_rig(table)}", highlight=False)
+        return
+    if path is None or out is None:
+        raise PhysmotionError("import needs a FILE and -o OUT (or --rig list to see the rig tables)")
+    _check_out(out)
     from physmotion.io.export import save_motion
     from physmotion.io.importer import import_clip
 
-    motion = import_clip(path, rig=rig, asf=asf, fps=fps, up_axis=up_axis, units=units)
+    motion = import_clip(path, rig=rig, mapping=mapping, asf=asf, fps=fps, up_axis=up_axis, units=units)
     save_motion(motion, out)
     console.print(f"wrote {out}: {motion.num_frames} frames, {motion.seconds:.1f} s", highlight=False)
 
@@ -93,10 +152,13 @@ def import_motion(
 def export_motion(
     path: Path = typer.Argument(..., help="A motion .npz."),
     out: Path = typer.Option(..., "-o", "--out", help="Output .bvh or .npz."),
+    overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
     """Write a motion to BVH (metres, Y up, the 22-joint rig) or .npz."""
     from physmotion.io.export import save_motion
     from physmotion.motion import Motion
+
+    _check_out(out, overwrite)
 
     save_motion(Motion.load(path), out)
     console.print(f"wrote {out}", highlight=False)
@@ -106,6 +168,7 @@ def export_motion(
 def project_motion(
     path: Path = typer.Argument(..., help="A motion .npz (joints at any fps)."),
     out: Path = typer.Option(..., "-o", "--out", help="Output .npz with the projected motion."),
+    overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
     """Physics projection (PhysDiff's P): imitate the motion with the simulated humanoid."""
     from dataclasses import replace
@@ -113,6 +176,7 @@ def project_motion(
     from physmotion.motion import Motion
     from physmotion.physics.projection import project
 
+    _check_out(out, overwrite)
     motion = Motion.load(path)
     result = project(motion.joints, motion.fps)
     body = result.body if result.selected else None  # the input kept is not the humanoid's motion
@@ -128,35 +192,80 @@ def project_motion(
 
 @app.command("metrics")
 def metrics(
-    paths: list[Path] = typer.Argument(..., help="Motion .npz files (joints, fps)."),
+    paths: list[Path] = typer.Argument(
+        ..., help="Motion .npz files (joints, fps); import other formats first."),
     surface: str = typer.Option(
         "humanoid", help="Body surface for Penetrate/Float/Skate: 'humanoid' (MuJoCo geometry posed on "
         "the joints: the simulated body where the file carries it, as generate writes for projected "
         "motions) or 'joints' (a light model built from the joints alone)."),
+    as_json: bool = typer.Option(False, "--json", help="JSON instead of the table: units and, per file, "
+                                 "its label, path and metrics."),
+    as_csv: bool = typer.Option(False, "--csv", help="CSV instead of the table: one row per file (label, "
+                                "path, one column per metric)."),
+    out: Path | None = typer.Option(
+        None, "-o", "--out", help="Write the JSON or CSV to this file (atomically) instead of stdout; its "
+        "suffix (.json, .csv) picks the format if neither flag is given."),
+    overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
-    """Print the physical metrics (PhysDiff, EDGE/Morph, BioMoDiffuse) of one or more motions."""
-    from physmotion.metrics import format_table, physical_metrics
-    from physmotion.motion import Motion
+    """Print the physical metrics (PhysDiff, EDGE/Morph, BioMoDiffuse) of one or more motions.
+
+    One column per file, labelled by the shortest end of its path that tells it from the others
+    (a/x.npz and b/x.npz stay apart). Where the table is wider than the terminal the columns are
+    numbered and a legend names the files."""
+    from physmotion.metrics import physical_metrics
+    from physmotion.metrics.report import check_npz, fit_table, path_labels, table_width, to_csv, to_json
+    from physmotion.motion import Motion, write_atomic
 
     if surface not in ("humanoid", "joints"):
         raise PhysmotionError(f"--surface must be 'humanoid' or 'joints', got {surface!r}")
-    results = {}
+    if as_json and as_csv:
+        raise PhysmotionError("give --json or --csv, not both")
+    fmt = "json" if as_json else "csv" if as_csv else None
+    if out is not None:
+        fmt = fmt or {".json": "json", ".csv": "csv"}.get(out.suffix.lower())
+        if fmt is None:
+            raise PhysmotionError(f"{out}: give --json or --csv (or an -o ending in .json or .csv)")
+        _check_out(out, overwrite)
     for path in paths:
+        check_npz(path)
+    results = {}
+    for path, label in zip(paths, path_labels(paths)):
         motion = Motion.load(path)
         body = None
         if surface == "humanoid":
             from physmotion.physics.surface import HumanoidSurface
 
             body = HumanoidSurface(motion.humanoid)  # P's body where the file has it, else estimated
-        results[path.name] = physical_metrics(motion.joints, fps=motion.fps, body=body)
-    console.print(format_table(results, title=f"physical metrics ({surface} surface)"))
+        results[label] = physical_metrics(motion.joints, fps=motion.fps, body=body)
+    if fmt is None:
+        table, legend = fit_table(results, f"physical metrics ({surface} surface)", console.width)
+        # A table that still does not fit prints whole (wider than the terminal) rather than with cut cells.
+        Console(width=max(console.width, table_width(table))).print(table)
+        for line in legend:
+            console.print(line, highlight=False, markup=False)
+        return
+    text = to_json(results, paths, surface) if fmt == "json" else to_csv(results, paths)
+    if out is None:
+        sys.stdout.write(text)
+    else:
+        data = text.encode("utf-8")
+        write_atomic(out, lambda f: f.write(data))
+        console.print(f"wrote {out}", highlight=False)
 
 
 @app.command("generate")
 def generate_cmd(
-    texts: list[str] = typer.Argument(..., help="One or more captions, e.g. \"a person walks forward\"."),
-    out: Path = typer.Option(Path("out"), "-o", "--out", help="Output folder."),
-    seconds: float | None = typer.Option(None, help="Length of each motion in seconds (default: 6)."),
+    texts: list[str] = typer.Argument(
+        ..., help="One or more captions, e.g. \"a person walks forward\". The text encoder reads the first "
+        f"{MAX_TEXT_TOKENS} tokens of each (special tokens included): a longer caption is cut there, with "
+        "a warning. Words the model never saw in its training captions get a warning too (only for a "
+        "model folder with a vocabulary.txt, as the shipped model has)."),
+    out: Path = typer.Option(Path("out"), "-o", "--out", help="Output folder: each motion becomes "
+                             "<caption>_s<seed>_<k>.npz, .bvh and .gif (k: sample of that caption), and "
+                             "the run is appended to generate.json there."),
+    seconds: float | None = typer.Option(
+        None, help=f"Length of each motion in seconds, {MIN_FRAMES / FPS:g} to {MAX_FRAMES / FPS:g} (the "
+        "model's range: another model may allow less) (default: 6)."),
     physics: str | None = typer.Option(
         None, help="none, none+floor (plain sampling, shifted onto the floor as well as a constant "
         "shift can), post[:K] (K projections after sampling) or physdiff[:SCHEDULE] (projection "
@@ -170,26 +279,51 @@ def generate_cmd(
     cfg_scale: float | None = typer.Option(None, help="Classifier-free guidance scale (default: 2.5)."),
     model: Path | None = typer.Option(None, help="Model folder; the shipped model if left out."),
     preview: bool = typer.Option(True, help="Write a GIF preview per motion."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace files of the same names instead of "
+                                   "refusing (with --no-preview, an old GIF of the same name is removed)."),
 ) -> None:
     """Generate motions from text: .npz, .bvh and a GIF preview per sample.
 
     Unset options take GenerateConfig's and SamplerConfig's defaults (the values the help quotes)."""
-    from physmotion.diffusion.model import MotionDiffusion
-    from physmotion.generate import GenerateConfig, check_request, generate, write_outputs
+    from physmotion.diffusion.model import DEFAULT_MODEL_DIR, MotionDiffusion
+    from physmotion.generate import (
+        GenerateConfig,
+        check_outputs,
+        check_request,
+        generate,
+        long_prompts,
+        physics_summary,  # fmt: skip
+        unknown_prompt_words,
+        write_outputs,
+    )
 
     cfg = _with(GenerateConfig(), seconds=seconds, num=num, physics=physics, seed=seed)
     cfg.sampler = _with(cfg.sampler, sampler=sampler, steps=steps, eta=eta, cfg_scale=cfg_scale)
+    check_outputs(texts, out, cfg, overwrite)
     net = MotionDiffusion.load(model)
     check_request(texts, cfg, net)
+    for text, tokens in long_prompts(texts, net).items():
+        _warn(f"{_quote(text)} is {tokens} tokens long; the text encoder reads only the first "
+              f"{MAX_TEXT_TOKENS}, the rest is ignored")  # fmt: skip
+    unknown = unknown_prompt_words(texts, model or DEFAULT_MODEL_DIR)
+    for text, words in unknown.items():
+        where = f" (in {_quote(text)})" if len(texts) > 1 else ""
+        _warn(f"the model never saw {', '.join(repr(w) for w in words)} in training{where}; "
+              "expect a generic motion")  # fmt: skip
     with _step_bar("generating") as tick:
         result = generate(texts, cfg, net, on_step=tick)
-    paths = write_outputs(result, out, cfg, preview=preview)
-    log = result.projections
-    phys = ""
-    if log.tracked:
-        phys = (f"; humanoid tracked without a fall in {sum(log.tracked)}/{len(log.tracked)} projections, "
-                f"{sum(result.resets)} reset(s) in the outputs (each a jump back onto the motion)")
-    console.print(f"wrote {len(result.motions)} motion(s) to {out} ({len(paths)} files){phys}", highlight=False)
+    paths = write_outputs(result, out, cfg, preview=preview, overwrite=overwrite, model=model,
+                          unknown=unknown)
+    console.print(f"wrote {len(result.motions)} motion(s) to {out} ({len(paths)} files, run logged in "
+                  f"generate.json)", highlight=False)  # fmt: skip
+    phys = physics_summary(result)
+    if phys:
+        console.print(f"physics: {phys}", highlight=False)
+
+
+def _quote(text: str, limit: int = 40) -> str:
+    """A prompt for a one-line message: quoted, cut to ``limit`` characters."""
+    return repr(text if len(text) <= limit else text[: limit - 3] + "...")
 
 
 def _with(config, **given):
@@ -216,14 +350,15 @@ def _step_bar(label: str):
     return bar()
 
 
-train_app = typer.Typer(help="Train models.", no_args_is_help=True)
+train_app = typer.Typer(help="Train models.", no_args_is_help=True, context_settings=HELP)
 app.add_typer(train_app, name="train")
 
 
 @train_app.command("denoiser")
 def train_denoiser_cmd(
     data: Path = typer.Option(..., help="HumanML3D-layout folder (our build or a real HumanML3D)."),
-    out: Path = typer.Option(..., "-o", "--out", help="Run folder: model, train_state.pt, loss.csv."),
+    out: Path = typer.Option(..., "-o", "--out", help="Run folder: model, train_state.pt, loss.csv. Must be "
+                             "new or empty, unless --resume continues the run in it."),
     arch: str | None = typer.Option(
         None, help="transformer (MDM) or unet (BioMoDiffuse's 1D UNet) (default: transformer)."),
     d_model: int | None = typer.Option(None, help="Width (default: 256)."),
@@ -248,6 +383,11 @@ def train_denoiser_cmd(
     Unset options take TrainConfig's and DenoiserConfig's defaults (the values the help quotes)."""
     from physmotion.diffusion.denoiser import DenoiserConfig
     from physmotion.diffusion.train import TrainConfig, train_denoiser
+    from physmotion.paths import check_output
+
+    # A run folder is never replaced: a finished or interrupted run is hours of work (no --overwrite).
+    check_output(out, "folder", overwrite=resume,
+                 hint="pass --resume to continue its run, or choose another -o")
 
     den = _with(DenoiserConfig(), arch=arch, d_model=d_model, layers=layers, heads=heads)
     cfg = _with(TrainConfig(data=str(data), out=str(out), denoiser=den), crop=crop, batch_size=batch_size,
@@ -261,7 +401,7 @@ def train_denoiser_cmd(
 @train_app.command("evaluator")
 def train_evaluator_cmd(
     data: Path = typer.Option(..., help="HumanML3D-layout folder with train (and val, test) splits."),
-    out: Path = typer.Option(..., help="Output evaluator folder."),
+    out: Path = typer.Option(..., "-o", "--out", help="Output evaluator folder; must be new or empty."),
     epochs: int = typer.Option(150, help="Epochs over the train split; the best on val is kept."),
     batch_size: int = typer.Option(32, help="Batch size (contrastive negatives per caption)."),
     lr: float = typer.Option(1e-4, help="AdamW learning rate."),
@@ -272,6 +412,9 @@ def train_evaluator_cmd(
     """Train the text-motion evaluator (TMR-style contrastive retrieval) used by `physmotion evaluate`."""
     from physmotion.eval.evaluator import EvaluatorConfig
     from physmotion.eval.train import EvaluatorTrainConfig, train_evaluator
+    from physmotion.paths import check_output
+
+    check_output(out, "folder", hint="choose another -o (a trained evaluator is never replaced)")
 
     cfg = EvaluatorTrainConfig(data=str(data), out=str(out), evaluator=EvaluatorConfig(latent_dim=latent_dim),
                                epochs=epochs, batch_size=batch_size, lr=lr, device=device, seed=seed)  # fmt: skip
@@ -297,6 +440,7 @@ def evaluate_cmd(
     seed: int | None = typer.Option(None, help="Random seed (default: 0)."),
     quick: bool = typer.Option(False, "--quick", help="Smoke run: 32 motions, 2 repeats, 10 steps."),
     out: Path = typer.Option(Path("results/evaluate"), "-o", "--out", help="Writes <out>.md and <out>.json."),
+    overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
     """Generation metrics (our evaluator) and physical metrics per physics mode, as the papers' tables.
 
@@ -306,6 +450,8 @@ def evaluate_cmd(
     from physmotion.eval.table import EvaluateConfig, evaluate
     from physmotion.physics_mode import parse_modes
 
+    for written in (out.with_suffix(".md"), out.with_suffix(".json")):  # EvalTable.write's names
+        _check_out(written, overwrite)
     modes = tuple(str(m) for m in parse_modes(physics)) if physics is not None else None
     cfg = _with(EvaluateConfig.quick() if quick else EvaluateConfig(), modes=modes, split=split, seed=seed,
                 repeats=None if quick else repeats)
@@ -318,8 +464,60 @@ def evaluate_cmd(
     console.print("wrote " + ", ".join(str(p) for p in paths), highlight=False)
 
 
+@app.command("render")
+def render_cmd(
+    paths: list[Path] = typer.Argument(..., help="Motion files: .npz, or .bvh (imported on the fly)."),
+    out: Path = typer.Option(..., "-o", "--out", help="Output .gif or .mp4 (mp4 needs the 'video' extra), "
+                             "or .png with --frame."),
+    layout: str = typer.Option("side", help="side (one panel per motion) or overlay (one panel, a colour "
+                               "per motion, with a legend)."),
+    frame: int | None = typer.Option(None, help="Write only this frame (0-based, at the common rate) as a .png."),
+    size: int = typer.Option(480, help="Pixels per panel (square)."),
+    rig: str | None = typer.Option(None, help="Rig of .bvh input, as for `import` (guessed if left out)."),
+    fps: float | None = typer.Option(None, help="True frame rate of .bvh input, as for `import`."),
+    overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
+) -> None:
+    """Draw motions side by side or overlaid: floor grid with a 1 m bar, frame/time counter, foot contacts.
+
+    Motions at different rates are resampled to the highest; a shorter motion holds its last frame."""
+    from physmotion.render import render_files
+
+    _check_out(out, overwrite)
+    done = render_files(paths, out, layout=layout, size=size, frame=frame, rig=rig, fps=fps)  # type: ignore[arg-type]
+    console.print(f"wrote {out}: {done.frames} frame(s) at {done.fps:g} fps, {done.width}x{done.height} px",
+                  highlight=False)
+
+
+@app.command("view")
+def view_cmd(
+    paths: list[Path] = typer.Argument(..., help="Motion files: .npz, or .bvh (imported on the fly)."),
+    out: Path = typer.Option(..., "-o", "--out", help="Output .html: one self-contained page, no network."),
+    rig: str | None = typer.Option(None, help="Rig of .bvh input, as for `import` (guessed if left out)."),
+    fps: float | None = typer.Option(None, help="True frame rate of .bvh input, as for `import`."),
+    overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
+) -> None:
+    """Write a 3-D viewer page (WebGL): orbit camera, play/pause, scrub slider, foot contacts, floor grid."""
+    from physmotion.viewer import view_files
+
+    _check_out(out, overwrite)
+    done = view_files(paths, out, rig=rig, fps=fps)
+    console.print(f"wrote {out}: {done.frames} frames at {done.fps:g} fps, {done.bytes / 1e6:.1f} MB; "
+                  "open it in a browser", highlight=False)  # fmt: skip
+
+
 def main() -> None:
     """Entry point of the console script: user errors become one line, never a traceback."""
+    import warnings
+
+    shown = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, PhysmotionWarning):
+            _warn(str(message))
+        else:
+            shown(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = show  # a library warning reads as one line, like an error
     try:
         app()
     except PhysmotionError as exc:

@@ -11,3 +11,7 @@ MAX_FRAMES: int = 196
 
 MIN_FRAMES: int = 40
 """Shortest clip or window kept in a dataset (HumanML3D: 2 s)."""
+
+MAX_TEXT_TOKENS: int = 32
+"""Tokens of a caption the text encoder reads (special tokens included); the rest is cut off. Our
+captions are short; HumanML3D's are under 30 words."""

@@ -11,3 +11,8 @@ class MotionFormatError(PhysmotionError):
 
 class ShapeError(PhysmotionError):
     """An array whose shape or values do not fit what a function expects."""
+
+
+class PhysmotionWarning(UserWarning):
+    """Something a user should know that does not stop the work (an assumed value, a truncated input);
+    the CLI prints it as one ``warning: ...`` line."""

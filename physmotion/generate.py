@@ -15,6 +15,9 @@ from __future__ import annotations
 
 import json
 import re
+import sys
+import time
+import unicodedata
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -31,7 +34,7 @@ from physmotion.motion import Motion, write_atomic
 from physmotion.physics.projection import ProjectionConfig
 from physmotion.physics_mode import FLOOR, PHYSDIFF, POST, PhysicsMode
 
-MAX_TEXT_CHARS = 500
+GENERATE_LOG = "generate.json"
 
 
 @dataclass
@@ -71,8 +74,8 @@ def check_request(texts: Sequence[str], config: GenerateConfig, model: MotionDif
     for t in texts:
         if not isinstance(t, str) or not t.strip():
             raise PhysmotionError("text is empty: describe a motion, e.g. 'a person walks forward'")
-        if len(t) > MAX_TEXT_CHARS:
-            raise PhysmotionError(f"text is {len(t)} characters long; the limit is {MAX_TEXT_CHARS}")
+    # A prompt longer than the text encoder's token limit is not refused: the encoder reads its first
+    # max_tokens tokens (see long_prompts, which the CLI warns with).
     lo, hi = MIN_FRAMES / FPS, model.denoiser.max_frames / FPS
     if not np.isfinite(config.seconds) or not lo <= config.seconds <= hi:
         raise PhysmotionError(f"--seconds must be between {lo:g} and {hi:g} (the model's range), got {config.seconds:g}")
@@ -140,43 +143,178 @@ def generate(
 
 
 def slug(text: str, limit: int = 40) -> str:
-    """A file-name stem from a caption: lower case, words joined by '_'."""
-    return re.sub(r"[^a-z0-9]+", "_", text.lower()).strip("_")[:limit].rstrip("_") or "motion"
+    """A file-name stem from a caption: lower case, runs of anything but letters and digits become '_'.
+
+    Letters of any script are kept ("una persona camina" -> "una_persona_camina", "人が歩く" stays);
+    only where the file-system encoding cannot spell them does the stem fall back to ASCII.
+    """
+    stem = _squash("".join(c if c.isalnum() else "_" for c in text.lower()), limit)
+    try:
+        stem.encode(sys.getfilesystemencoding())
+    except UnicodeEncodeError:
+        ascii_text = unicodedata.normalize("NFKD", text).encode("ascii", "ignore").decode()
+        stem = _squash(re.sub(r"[^a-z0-9]", "_", ascii_text.lower()), limit)
+    return stem or "motion"
 
 
-def write_outputs(result: GenerateResult, out: str | Path, config: GenerateConfig, preview: bool = True) -> list[Path]:
-    """Write .npz, .bvh and (optionally) a .gif preview per motion, plus ``generate.json``; returns the paths.
+def _squash(stem: str, limit: int) -> str:
+    """Runs of '_' made one, and cut to ``limit`` characters at a word end where the cut is not too short."""
+    stem = re.sub(r"_+", "_", stem).strip("_")
+    if len(stem) > limit:
+        cut = stem[: limit + 1].rfind("_")
+        stem = stem[:cut] if cut >= limit // 2 else stem[:limit]
+    return stem.rstrip("_")
 
-    Every file is written atomically, so an interrupted run leaves only whole files.
+
+OUTPUT_SUFFIXES = (".npz", ".bvh", ".gif")
+
+
+def output_stems(texts: Sequence[str], config: GenerateConfig) -> list[str]:
+    """File stems of a run, one per motion in ``generate``'s order: ``<slug>_s<seed>_<k>``.
+
+    k counts the samples of a caption (0..num-1; a caption given twice goes on counting), so runs with
+    another seed, caption or count never share a name.
+    """
+    counts: dict[str, int] = {}
+    stems = []
+    for text in texts:
+        base = f"{slug(text.strip())}_s{config.seed}"
+        for _ in range(config.num):
+            k = counts[base] = counts.get(base, -1) + 1
+            stems.append(f"{base}_{k}")
+    return stems
+
+
+def check_outputs(
+    texts: Sequence[str], out: str | Path, config: GenerateConfig, overwrite: bool = False
+) -> None:
+    """Raise PhysmotionError before any work where the run could not write ``out`` or would replace a file.
+
+    Every file the run may write (.npz, .bvh and .gif of each motion: an old GIF of the same stem is
+    checked too, so none is left claiming to show a new motion) must be new unless ``overwrite``;
+    ``out/generate.json`` must be absent or a run log this run can append to.
+    """
+    from physmotion.paths import check_output
+
+    out = Path(out)
+    check_output(out, "folder", overwrite=True)
+    hint = "pass --overwrite to replace it, or use another --seed or -o"
+    for stem in output_stems(texts, config):
+        for suffix in OUTPUT_SUFFIXES:
+            check_output(out / f"{stem}{suffix}", "file", overwrite=overwrite, hint=hint)
+    _read_log(out / GENERATE_LOG)
+
+
+def _read_log(path: Path) -> list[dict]:
+    """The run records of an existing generate.json (a single-run file from older versions included)."""
+    if not path.exists():
+        return []
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise PhysmotionError(f"{path}: not a generate.json run log ({exc}); move it away") from None
+    if isinstance(data, dict) and isinstance(data.get("runs"), list):
+        return data["runs"]
+    if isinstance(data, dict):
+        return [data]
+    raise PhysmotionError(f"{path}: not a generate.json run log; move it away")
+
+
+def long_prompts(texts: Sequence[str], model: MotionDiffusion) -> dict[str, int]:
+    """Prompts longer than the text encoder reads, with their token counts: the encoder keeps the first
+    ``max_tokens`` tokens of each and ignores the rest."""
+    from physmotion.text.encoder import load_text_encoder
+
+    encoder = load_text_encoder(model.text_encoder)
+    counts = {t.strip(): encoder.count_tokens(t.strip()) for t in texts}
+    return {t: n for t, n in counts.items() if n > encoder.max_tokens}
+
+
+def unknown_prompt_words(texts: Sequence[str], model_dir: str | Path) -> dict[str, list[str]]:
+    """prompt -> its words that the model's training captions never had (only prompts with some).
+
+    Empty where the model folder has no vocabulary file: nothing is known about what it saw."""
+    from physmotion.text.vocabulary import load_vocabulary, unknown_words
+
+    vocabulary = load_vocabulary(model_dir)
+    if vocabulary is None:
+        return {}
+    found = {t.strip(): unknown_words(t, vocabulary) for t in texts}
+    return {t: w for t, w in found.items() if w}
+
+
+def physics_summary(result: GenerateResult) -> str:
+    """The projections' falls and resets in plain words, for the end of a run ('' without projections)."""
+    log = result.projections
+    if not log.tracked:
+        return ""
+    falls, resets = len(log.tracked) - sum(log.tracked), sum(result.resets)
+    if not falls:
+        return f"the simulated humanoid followed the motion without falling in all {len(log.tracked)} " \
+            "projections"
+    return (f"the simulated humanoid fell in {falls} of {len(log.tracked)} projections; each time it was "
+            "put back onto the motion (a reset), which shows as a sudden jump in the output: "
+            f"{resets} such jump(s) in the files written (per file in generate.json, 'resets')")
+
+
+def write_outputs(
+    result: GenerateResult,
+    out: str | Path,
+    config: GenerateConfig,
+    preview: bool = True,
+    overwrite: bool = False,
+    model: str | Path | None = None,
+    unknown: dict[str, list[str]] | None = None,
+) -> list[Path]:
+    """Write .npz, .bvh and (optionally) a .gif preview per motion as ``<slug>_s<seed>_<k>.*``, and append
+    a run record to ``generate.json``; returns the motion files written.
+
+    Refuses (PhysmotionError) to replace any file unless ``overwrite``; without a preview, an old GIF of
+    the same stem is removed. model: the model folder, recorded; unknown: prompt -> words the model
+    never saw, recorded. Every file is written atomically, so an interrupted run leaves only whole files.
     """
     from physmotion.io.export import save_bvh
     from physmotion.render import save_gif
 
     out = Path(out)
+    texts = [m.texts[0] for m in result.motions[:: config.num]]  # motions are text-major, num per text
+    check_outputs(texts, out, config, overwrite)
+    stems = output_stems(texts, config)
     out.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
-    counts: dict[str, int] = {}
-    for motion in result.motions:
-        stem = slug(motion.texts[0])
-        k = counts[stem] = counts.get(stem, -1) + 1
-        base = out / f"{stem}_{k:02d}"
+    motions = []
+    for motion, stem in zip(result.motions, stems):
+        base = out / stem
         motion.save(base.with_suffix(".npz"))
         save_bvh(motion, base.with_suffix(".bvh"))
-        written += [base.with_suffix(".npz"), base.with_suffix(".bvh")]
+        files = [base.with_suffix(".npz"), base.with_suffix(".bvh")]
         if preview:
             save_gif(base.with_suffix(".gif"), motion.joints, motion.fps, title=motion.texts[0])
-            written.append(base.with_suffix(".gif"))
+            files.append(base.with_suffix(".gif"))
+        else:
+            base.with_suffix(".gif").unlink(missing_ok=True)  # a stale preview of another motion
+        written += files
+        motions.append({"prompt": motion.texts[0], "sample": int(stem.rsplit("_", 1)[1]),
+                        "files": [p.name for p in files], "resets": motion.resets})  # fmt: skip
     log = result.projections
     settings = asdict(config)
     settings["physics"] = str(config.physics)
     settings["projection"] = reset_settings(config.projection)
-    summary = {
-        "config": settings,
-        "files": [p.name for p in written],
+    record = {
+        "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "prompts": texts,
+        "seed": config.seed,
+        "model": str(model) if model is not None else "default (physmotion/models/default)",
+        "settings": settings,
+        "preview": preview,
+        "unknown_words": {t: w for t, w in (unknown or {}).items() if w},
         "licence_tag": result.motions[0].licence_tag if result.motions else "",
         "projections": {"calls": log.calls, "projected": len(log.selected), "without_fall": int(sum(log.tracked)),
                         "resets_total": int(sum(log.resets))},
-        "resets_per_motion": dict(zip([p.name for p in written if p.suffix == ".npz"], result.resets)),
+        "motions": motions,
+        "files": [p.name for p in written],
     }
-    write_atomic(out / "generate.json", lambda f: f.write(json.dumps(summary, indent=2)), "w")
+    runs = _read_log(out / GENERATE_LOG) + [record]
+    data = json.dumps({"runs": runs}, indent=2, ensure_ascii=False).encode("utf-8")
+    write_atomic(out / GENERATE_LOG, lambda f: f.write(data))
     return written

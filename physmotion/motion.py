@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 import tempfile
-import zipfile
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from physmotion.conventions import FPS
-from physmotion.errors import MotionFormatError, ShapeError
+from physmotion.errors import MotionFormatError, PhysmotionError, PhysmotionWarning, ShapeError
 from physmotion.skeleton import NUM_JOINTS, inverse_kinematics
 
 
@@ -42,7 +42,10 @@ class Motion:
     resets: int | None = None
 
     def __post_init__(self) -> None:
-        self.joints = np.asarray(self.joints, dtype=np.float32)
+        if np.asarray(self.joints).dtype.kind not in "fiu":
+            raise ShapeError(f"joints must be real numbers, got {np.asarray(self.joints).dtype}")
+        with np.errstate(over="ignore"):  # beyond float32's range becomes inf, which check_joints refuses
+            self.joints = np.asarray(self.joints, dtype=np.float32)
         check_joints(self.joints)
         if self.fps <= 0 or not np.isfinite(self.fps):
             raise ShapeError(f"fps must be a positive number, got {self.fps}")
@@ -91,7 +94,9 @@ class Motion:
 
     @classmethod
     def load(cls, path: str | Path) -> Motion:
-        """Read a motion .npz written by :meth:`save` (or any .npz with a ``joints`` array)."""
+        """Read a motion .npz written by :meth:`save` (or any .npz with a ``joints`` array).
+
+        A file without ``fps`` is read at the project's rate, with a :class:`PhysmotionWarning` naming it."""
         path = Path(path)
         if not path.is_file():
             raise MotionFormatError(f"{path}: no such file")
@@ -100,7 +105,10 @@ class Motion:
                 if "joints" not in data:
                     raise MotionFormatError(f"{path}: not a motion file (no 'joints' array)")
                 text = str(data["text"]) if "text" in data else ""
-                return cls(
+                if "fps" not in data:
+                    warnings.warn(f"{path} has no 'fps' array; assuming {FPS} fps", PhysmotionWarning,
+                                  stacklevel=2)  # fmt: skip
+                motion = cls(
                     joints=data["joints"],
                     fps=float(data["fps"]) if "fps" in data else FPS,
                     rotations=data["rotations"] if "rotations" in data else None,
@@ -111,8 +119,30 @@ class Motion:
                     humanoid=data["humanoid"] if "humanoid" in data else None,
                     resets=int(data["resets"]) if "resets" in data else None,
                 )
-        except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-            raise MotionFormatError(f"{path}: not a readable .npz file ({exc})") from None
+                _check_pose_arrays(motion, path)
+                return motion
+        except PhysmotionError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - corrupt npz bytes raise zipfile, zlib, tokenize,
+            # MemoryError (a header claiming a huge shape), TypeError, ValueError ...: all mean "unreadable"
+            detail = " ".join(str(exc).split())[:160]
+            why = f"{type(exc).__name__}: {detail}"
+            raise MotionFormatError(f"{path}: not a readable .npz file ({why})") from None
+
+
+def _check_pose_arrays(motion: Motion, path: Path) -> None:
+    """Rotations and offsets read from a file must fit the joints and be finite (or be absent)."""
+    n = motion.num_frames
+    for name, value, shape in (
+        ("rotations", motion.rotations, (n, NUM_JOINTS, 3, 3)),
+        ("offsets", motion.offsets, (NUM_JOINTS, 3)),
+    ):
+        if value is None:
+            continue
+        arr = np.asarray(value, dtype=np.float32)
+        if arr.shape != shape or not np.all(np.isfinite(arr)):
+            raise MotionFormatError(f"{path}: '{name}' must be finite with shape {shape}, got {arr.shape}")
+        setattr(motion, name, arr)
 
 
 def check_joints(joints: np.ndarray, name: str = "joints") -> None:

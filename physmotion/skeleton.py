@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from physmotion.errors import ShapeError
+
 JOINT_NAMES: tuple[str, ...] = (
     "pelvis", "left_hip", "right_hip", "spine1", "left_knee", "right_knee", "spine2",
     "left_ankle", "right_ankle", "spine3", "left_foot", "right_foot", "neck", "left_collar",
@@ -79,6 +81,25 @@ def bone_lengths(joints: np.ndarray) -> np.ndarray:
     """
     parents = np.array([max(p, 0) for p in PARENTS])
     return np.linalg.norm(joints - joints[..., parents, :], axis=-1)
+
+
+MIN_BONE_LENGTH = 1e-4
+"""Metres. A shorter bone has no direction: IK cannot aim it and the humanoid cannot give it a geom."""
+
+
+def check_bone_lengths(offsets: np.ndarray, hint: str = "") -> None:
+    """Raise ShapeError naming the first bone of ``offsets`` (22, 3) shorter than MIN_BONE_LENGTH.
+
+    hint: appended to the message (what the caller's user can change, e.g. a rig mapping).
+    """
+    lengths = np.linalg.norm(np.asarray(offsets, dtype=np.float64), axis=-1)
+    short = [j for j in range(1, NUM_JOINTS) if not lengths[j] >= MIN_BONE_LENGTH]  # NaN counts as short
+    if short:
+        j = short[0]
+        parent, child = JOINT_NAMES[PARENTS[j]], JOINT_NAMES[j]
+        more = f" (and {len(short) - 1} more)" if len(short) > 1 else ""
+        tail = f": {hint}" if hint else ""
+        raise ShapeError(f"zero-length bone {parent} -> {child} ({1000 * lengths[j]:.2g} mm){more}{tail}")
 
 
 def rest_joints(offsets: np.ndarray | None = None, root_height: float | None = None) -> np.ndarray:

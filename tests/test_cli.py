@@ -69,9 +69,17 @@ def test_data_build_and_stats(mocap_dir: Path, tmp_path: Path) -> None:
     res = run("data", "build", "--source", mocap_dir, "--out", out, "--exclude-license", "NC")
     assert res.returncode == 0, res.stderr
     assert "built" in res.stdout and (out / "Mean.npy").is_file()
+    capture, mirrored = (float(x) for x in re.search(
+        r"([\d.]+) min of capture \(([\d.]+) min with mirrored copies\)", res.stdout).groups())  # fmt: skip
+    assert mirrored == pytest.approx(2 * capture, abs=0.1)
     res = run("data", "stats", out)
     assert res.returncode == 0, res.stderr
     assert "train" in res.stdout and "vocabulary" in res.stdout and "walk" in res.stdout
+    assert "mirrored copies (ids starting with M) included" in res.stdout
+    total = float(next(line for line in res.stdout.splitlines() if "│ all" in line).split("│")[3])
+    assert total == pytest.approx(mirrored, abs=0.1)  # stats' minutes are the build's with mirrors
+    res = run("data", "build", "--source", mocap_dir, "--out", out, "--exclude-license", "NC")
+    assert res.returncode == 1 and "--overwrite" in res.stderr  # an earlier build is kept unless asked
 
 
 def test_data_stats_on_a_missing_folder(tmp_path: Path) -> None:
@@ -109,7 +117,7 @@ def test_project_writes_the_simulated_motion(mocap_dir: Path, tmp_path: Path) ->
     npz, out = tmp_path / "walk.npz", tmp_path / "projected.npz"
     assert run("import", mocap_dir / BANDAI_WALK, "-o", npz).returncode == 0
     short = Motion.load(npz)
-    short.joints = short.joints[:60]
+    short.joints, short.rotations = short.joints[:60], short.rotations[:60]  # a file's arrays must agree
     short.save(npz)
     res = run("project", npz, "-o", out)
     assert res.returncode == 0, res.stderr

@@ -63,8 +63,9 @@ class BuildReport:
     out: Path
     num_clips: int = 0
     num_items: dict[str, int] = field(default_factory=dict)
-    minutes: float = 0.0
+    minutes: float = 0.0  # distinct capture: mirrored copies not counted
     skipped: dict[str, str] = field(default_factory=dict)
+    minutes_with_mirrors: float = 0.0  # every item, mirrored copies included (what training draws from)
 
 
 @dataclass
@@ -180,7 +181,7 @@ def build_dataset(
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}."))
     try:
-        report.num_items, report.minutes = _write_layout(tmp, items, config)
+        report.num_items, report.minutes, report.minutes_with_mirrors = _write_layout(tmp, items, config)
         info = {
             "source": str(Path(source)),
             "config": asdict(config),
@@ -219,7 +220,7 @@ def _run_all(clips: list[ClipInfo], config: BuildConfig, progress: bool) -> list
             return results
 
 
-def _write_layout(root: Path, items: list[_Item], config: BuildConfig) -> tuple[dict[str, int], float]:
+def _write_layout(root: Path, items: list[_Item], config: BuildConfig) -> tuple[dict[str, int], float, float]:
     for sub in ("new_joints", "new_joint_vecs", "texts"):
         (root / sub).mkdir()
     split_ids: dict[str, list[str]] = {s: [] for s in SPLITS}
@@ -245,7 +246,8 @@ def _write_layout(root: Path, items: list[_Item], config: BuildConfig) -> tuple[
     counts = {s: len(ids) for s, ids in split_ids.items()}
     # Minutes of distinct motion: mirrored copies are not counted twice.
     minutes = sum(i.features.shape[0] for i in items if not i.mirrored) / FPS / 60
-    return counts, minutes
+    with_mirrors = sum(i.features.shape[0] for i in items) / FPS / 60
+    return counts, minutes, with_mirrors
 
 
 def _replace_dir(new: Path, out: Path) -> None:

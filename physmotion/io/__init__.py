@@ -3,10 +3,12 @@
     clips = load_manifest(mocap_dir)          # the rows of shared/data/mocap/manifest.csv
     motion = import_clip(clips[0])            # canonical Motion: 22 joints, metres, Y up, 20 fps
     motion = import_clip("my.bvh", mapping={...}, units="cm", fps=60)   # a user's own rig
+    motion = import_clip("my.bvh", mapping="map.json")                  # ... described in a file
     save_bvh(motion, "out.bvh"); save_npz(motion, "out.npz")
 
 Modules: ``bvh`` (BVH reader/writer), ``amc`` (ASF/AMC reader), ``rigs`` (generic rig tree and
-per-rig tables), ``canonical`` (to the project's conventions), ``importer``, ``export``.
+per-rig tables), ``mapping`` (a user's rig as a JSON file), ``canonical`` (to the project's
+conventions), ``importer``, ``export``.
 """
 
 from physmotion.io.export import save_bvh, save_motion, save_npz

@@ -68,17 +68,23 @@ def read_asf(path: str | Path) -> Skeleton:
         words = line.split()
         if len(words) >= 2 and words[0] == "length":
             length_scale = _float(words[1], where)
+            if length_scale <= 0:
+                raise MotionFormatError(f"{where}: ASF ':units length' must be positive, got {words[1][:40]}")
         elif len(words) >= 2 and words[0] == "angle":
             degrees = words[1].lower().startswith("deg")
     root = Bone("root", dofs=("tx", "ty", "tz", "rx", "ry", "rz"))
     for line in sections.get(":root", []):
         words = line.split()
-        if words and words[0] == "order":
+        if words[0] == "order":
             root.dofs = tuple(w.lower() for w in words[1:])
-        elif words and words[0] == "axis" and len(words) == 2:
-            root.order = words[1].upper()
-        elif words and words[0] == "orientation":
-            root.axis = np.array([_float(w, where) for w in words[1:4]])
+            bad = [d for d in root.dofs if d not in _ROOT_DOFS]
+            if bad or len(set(root.dofs)) != len(root.dofs):
+                listed = " ".join(words[1:7])[:60]
+                raise MotionFormatError(f"{where}: ASF root order must list distinct TX..RZ, got {listed!r}")
+        elif words[0] == "axis" and len(words) == 2:
+            root.order = _order(words[1], where, "root")
+        elif words[0] == "orientation":
+            root.axis = _vector(words, where, "root orientation")
     bones = {"root": root}
     bone: Bone | None = None
     for line in sections[":bonedata"]:
@@ -91,24 +97,26 @@ def read_asf(path: str | Path) -> Skeleton:
         elif key == "end":
             if not bone.name:
                 raise MotionFormatError(f"{where}: ASF bone without a name")
+            if bone.name in bones:
+                raise MotionFormatError(f"{where}: ASF bone {bone.name[:40]!r} is defined twice")
             bones[bone.name] = bone
             bone = None
         elif key == "name":
-            bone.name = words[1]
+            bone.name = words[1] if len(words) > 1 else ""
         elif key == "direction":
-            bone.direction = np.array([_float(w, where) for w in words[1:4]])
+            bone.direction = _vector(words, where, f"bone {bone.name} direction")
         elif key == "length":
-            bone.length = _float(words[1], where)
+            bone.length = _float(words[1] if len(words) > 1 else "", where)
         elif key == "axis":
-            bone.axis = np.array([_float(w, where) for w in words[1:4]])
-            bone.order = words[4].upper() if len(words) > 4 else "XYZ"
+            bone.axis = _vector(words, where, f"bone {bone.name} axis")
+            bone.order = _order(words[4], where, bone.name) if len(words) > 4 else "XYZ"
         elif key == "dof":
             bone.dofs = tuple(w.lower() for w in words[1:])
             if any(d not in ("rx", "ry", "rz") for d in bone.dofs):
                 raise MotionFormatError(
-                    f"{where}: bone {bone.name}: only rotation dofs are supported, got {bone.dofs}"
+                    f"{where}: bone {bone.name}: only rotation dofs are supported, got {bone.dofs[:6]}"
                 )
-    ordered = ["root"]
+    children: dict[str, list[str]] = {}
     for line in sections[":hierarchy"]:
         words = line.split()
         if words[0] in ("begin", "end"):
@@ -116,15 +124,42 @@ def read_asf(path: str | Path) -> Skeleton:
         for child in words[1:]:
             if child not in bones or words[0] not in bones:
                 raise MotionFormatError(
-                    f"{where}: ASF hierarchy names an unknown bone ({words[0]} -> {child})"
+                    f"{where}: ASF hierarchy names an unknown bone ({words[0][:40]} -> {child[:40]})"
+                )
+            if bones[child].parent or child == "root":
+                raise MotionFormatError(
+                    f"{where}: ASF bone {child[:40]!r} has more than one parent (or is the root)"
                 )
             bones[child].parent = words[0]
-            ordered.append(child)
-    missing = [b for b in bones if b not in ordered]
+            children.setdefault(words[0], []).append(child)
+    ordered = _parents_first(children, where)
+    reached = set(ordered)
+    missing = [b for b in bones if b not in reached]
     if missing:
-        raise MotionFormatError(f"{where}: ASF bones missing from the hierarchy: {missing[:5]}")
-    ordered = _parents_first(ordered, bones, where)
+        raise MotionFormatError(
+            f"{where}: ASF bones not connected to the root (missing from the hierarchy, or in a cycle): "
+            f"{', '.join(m[:40] for m in missing[:5])}"
+        )
     return Skeleton({b: bones[b] for b in ordered}, METRES_PER_INCH / length_scale, degrees)
+
+
+_ROOT_DOFS = ("tx", "ty", "tz", "rx", "ry", "rz")
+
+
+def _vector(words: list[str], where: str, what: str) -> np.ndarray:
+    """The three numbers after a keyword (``direction 0 1 0``)."""
+    if len(words) < 4:
+        raise MotionFormatError(f"{where}: ASF {what} needs three numbers, got {' '.join(words[1:])[:40]!r}")
+    return np.array([_float(w, where) for w in words[1:4]])
+
+
+def _order(word: str, where: str, bone: str) -> str:
+    """A rotation order: a permutation of XYZ."""
+    if sorted(word.upper()) != ["X", "Y", "Z"]:
+        raise MotionFormatError(
+            f"{where}: bone {bone[:40]}: axis order must be a permutation of XYZ, got {word[:40]!r}"
+        )
+    return word.upper()
 
 
 def _sections(text: str) -> dict[str, list[str]]:
@@ -145,36 +180,38 @@ def _sections(text: str) -> dict[str, list[str]]:
     return out
 
 
-def _parents_first(ordered: list[str], bones: dict[str, Bone], where: str) -> list[str]:
-    out: list[str] = []
-    placed: set[str] = set()
-    pending = list(ordered)
-    while pending:
-        rest = [b for b in pending if not (b == "root" or bones[b].parent in placed)]
-        if len(rest) == len(pending):
-            raise MotionFormatError(f"{where}: ASF hierarchy is not a tree rooted at 'root'")
-        out.extend(b for b in pending if b not in rest)
-        placed.update(out)
-        pending = rest
+def _parents_first(children: dict[str, list[str]], where: str) -> list[str]:
+    """Bones reachable from the root, parents before children (breadth first: linear, no recursion).
+
+    Each bone has one parent (checked by the caller), so a bone in a cycle is never reached.
+    """
+    out = ["root"]
+    for bone in out:  # the list grows while it is walked
+        out.extend(children.get(bone, ()))
     return out
 
 
 def _float(word: str, where: str) -> float:
     try:
-        return float(word)
+        value = float(word)
     except ValueError:
         raise MotionFormatError(f"{where}: expected a number, got {word[:40]!r}") from None
+    if not np.isfinite(value):
+        raise MotionFormatError(f"{where}: NaN or infinite number {word[:40]!r} in the ASF file")
+    return value
 
 
-def read_amc(path: str | Path, skeleton: Skeleton | str | Path) -> RigMotion:
+def read_amc(path: str | Path, skeleton: Skeleton | str | Path, keep: set[str] | None = None) -> RigMotion:
     """Read an AMC motion on its ASF skeleton (a path or a parsed :class:`Skeleton`).
 
     Returns a RigMotion in ASF units (``units`` set from ``:units length``), fps None.
+    keep: node names needed (bones, or ``<bone>_end``); only they and their ancestors are built.
+    None: every node.
     """
     skel = skeleton if isinstance(skeleton, Skeleton) else read_asf(skeleton)
     where = str(path)
     values = _parse_amc(read_text(path, "AMC"), skel, where)
-    return _to_rig(skel, values, where)
+    return _to_rig(skel, values, where, keep)
 
 
 _NAME = re.compile(r"^[ \t]*([A-Za-z_][^ \t\r\n]*)", re.MULTILINE)  # a bone name opening a line
@@ -264,10 +301,27 @@ def _numbers(words: np.ndarray, where: str) -> np.ndarray:
     return arr
 
 
-def _to_rig(skel: Skeleton, values: dict[str, np.ndarray], where: str) -> RigMotion:
+def _kept_bones(skel: Skeleton, keep: set[str] | None) -> set[str]:
+    """The bones whose nodes ``keep`` names, and their ancestors (every bone for None)."""
+    if keep is None:
+        return set(skel.bones)
+    out: set[str] = set()
+    for name in keep:
+        bone = name if name in skel.bones else name.removesuffix("_end")
+        while bone in skel.bones and bone not in out:
+            out.add(bone)
+            bone = skel.bones[bone].parent
+    out.add("root")
+    return out
+
+
+def _to_rig(
+    skel: Skeleton, values: dict[str, np.ndarray], where: str, keep: set[str] | None = None
+) -> RigMotion:
     n = next(iter(values.values())).shape[0] if values else 0
     if n == 0:
         raise MotionFormatError(f"{where}: the AMC file has zero frames")
+    kept = _kept_bones(skel, keep)
     names: list[str] = []
     parents: list[int] = []
     offsets: list[np.ndarray] = []
@@ -277,6 +331,8 @@ def _to_rig(skel: Skeleton, values: dict[str, np.ndarray], where: str) -> RigMot
     identity = np.broadcast_to(np.eye(3), (n, 3, 3))
     has_child = {b.parent for b in skel.bones.values()}
     for bone in skel.bones.values():
+        if bone.name not in kept:
+            continue
         parent_bone = skel.bones.get(bone.parent)
         node_of[bone.name] = len(names)
         names.append(bone.name)
@@ -311,6 +367,8 @@ def _bone_rotation(bone: Bone, vals: np.ndarray | None, n: int, degrees: bool) -
     """L = C @ M @ C^-1 per frame, (T, 3, 3); M from the bone's rotation dofs in its axis order."""
     # ASF order "XYZ" rotates about fixed X, then Y, then Z: R = Rz @ Ry @ Rx, i.e. the matrix
     # product in the reversed order, which is how euler_to_matrix reads its axes.
+    if vals is None or not any(d.startswith("r") for d in bone.dofs):
+        return np.broadcast_to(np.eye(3), (n, 3, 3))  # C @ I @ C^-1: no need to build C
     seq = bone.order.upper()
     c = euler_to_matrix(bone.axis[::-1], seq[::-1], degrees)
     angles = np.zeros((n, 3))

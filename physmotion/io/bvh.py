@@ -65,6 +65,16 @@ def read_bvh(path: str | Path, keep: set[str] | None = None) -> RigMotion:
     return parse_bvh(read_text(path, "BVH"), str(path), keep)
 
 
+def bvh_joint_names(path: str | Path) -> tuple[str, ...]:
+    """Every node name of a BVH file's hierarchy, in file order (End Sites as ``<parent>_end``)."""
+    text = read_text(path, "BVH")
+    split = _MOTION.search(text)
+    tokens = (text[: split.start()] if split else text).split()
+    if not tokens or tokens[0] != "HIERARCHY":
+        raise MotionFormatError(f"{path}: not a BVH file (it does not start with HIERARCHY)")
+    return tuple(_parse_hierarchy(tokens, str(path))[0])
+
+
 def parse_bvh(text: str, where: str = "<bvh>", keep: set[str] | None = None) -> RigMotion:
     """Parse BVH text; ``where`` names the source in error messages; ``keep`` as in :func:`read_bvh`."""
     split = _MOTION.search(text)
@@ -142,7 +152,11 @@ def _parse_hierarchy(
                 stack.pop()
                 i += 1
             elif tok == "OFFSET":
-                offsets[stack[-1]] = np.array([float(t) for t in tokens[i + 1 : i + 4]])
+                offset = np.array([float(t) for t in tokens[i + 1 : i + 4]])
+                if offset.shape != (3,) or not np.all(np.isfinite(offset)):
+                    numbers = " ".join(tokens[i + 1 : i + 4])[:60]
+                    raise MotionFormatError(f"{where}: bad OFFSET of {names[stack[-1]][:40]}: {numbers}")
+                offsets[stack[-1]] = offset
                 i += 4
             elif tok == "CHANNELS":
                 count = int(tokens[i + 1])
@@ -158,6 +172,11 @@ def _parse_hierarchy(
         raise MotionFormatError(f"{where}: malformed or truncated BVH hierarchy near token {i}") from None
     if stack or pending is not None or not names:
         raise MotionFormatError(f"{where}: truncated BVH hierarchy (unclosed braces)")
+    seen: set[str] = set()
+    for name, end in zip(names, is_end, strict=True):
+        if name in seen and not end:  # a mapping could not tell the two apart
+            raise MotionFormatError(f"{where}: joint name {name[:40]!r} appears twice in the hierarchy")
+        seen.add(name)
     return names, parents, offsets, channels, is_end
 
 

@@ -31,6 +31,7 @@ from physmotion.io.rigs import RigMotion, RigTable
 from physmotion.skeleton import (
     FOOT_JOINTS,
     JOINT_INDEX,
+    check_bone_lengths,
     facing_direction,
     forward_kinematics,
     inverse_kinematics,
@@ -54,6 +55,8 @@ _TPOSE_ARM_OUT = np.cos(np.radians(30.0))  # ... and pointing out sideways
 _TPOSE_STRAIGHT = np.cos(
     np.radians(30.0)
 )  # thighs, shins within 30 deg of the trunk (CMU's rest legs splay 20)
+MAX_FRAMES = 1_000_000
+"""Most frames an import may produce: about 14 hours at 20 fps, far beyond any take."""
 _TPOSE_JUMP_M = 0.05  # mean joint displacement frame 0 -> 1, root-relative, metres
 _TPOSE_JUMP_RATIO = 5.0  # ... and that many times the displacement frame 1 -> 2
 
@@ -96,6 +99,12 @@ def canonicalize(
         raise PhysmotionError(f"up axis must be one of X, Y, Z, got {up_axis!r}")
     if not (np.isfinite(fps) and fps > 0):
         raise PhysmotionError(f"frame rate must be positive, got {fps}")
+    out_frames = (rig.num_frames - 1) * FPS / fps + 1
+    if out_frames > MAX_FRAMES:  # e.g. a Frame Time of 1e308 s: the resampled motion would not fit in memory
+        raise PhysmotionError(
+            f"a frame rate of {fps:.3g} fps makes {out_frames:.3g} frames at {FPS} fps "
+            f"(more than {MAX_FRAMES}): give the true rate with --fps"
+        )
     rig = rig.subset(table.nodes())
     weights = table.weights(rig.names)
     to_world = _TO_Y_UP[up_axis] * units
@@ -111,6 +120,7 @@ def canonicalize(
         raise MotionFormatError("the motion has NaN or infinite joint positions")
     rigid = _rigid_pelvis(raw)
     offsets = offsets_from_joints(rigid)
+    check_bone_lengths(offsets, "its two joints sit on one rig point (check the rig table or mapping)")
     rotations, root = inverse_kinematics(rigid, offsets)
     joints = forward_kinematics(rotations, root, offsets)
     misfit = np.linalg.norm(joints - raw, axis=-1)

@@ -11,9 +11,10 @@ from typing import TypeVar
 import numpy as np
 
 from physmotion.errors import MotionFormatError, PhysmotionError
-from physmotion.io.amc import read_amc
-from physmotion.io.bvh import read_bvh
+from physmotion.io.amc import read_amc, read_asf
+from physmotion.io.bvh import bvh_joint_names, read_bvh
 from physmotion.io.canonical import canonicalize
+from physmotion.io.mapping import load_mapping
 from physmotion.io.rigs import RIGS, JointSource, RigMotion, RigTable, parse_units, table_from_mapping
 from physmotion.motion import Motion
 
@@ -102,7 +103,7 @@ def import_clip(
     fps: float | None = None,
     up_axis: str | None = None,
     units: str | float | None = None,
-    mapping: Mapping[str, JointSource] | None = None,
+    mapping: Mapping[str, JointSource] | str | Path | None = None,
     asf: str | Path | None = None,
     drop_tpose: bool = True,
 ) -> Motion:
@@ -115,8 +116,10 @@ def import_clip(
     table, the manifest, "Y"; fps: the argument, the manifest (the file's true rate), the BVH header.
 
     rig: a name in :data:`~physmotion.io.rigs.RIGS` or a RigTable; mapping: a user rig's dict of
-    SMPL joint -> rig joint (or blend); asf: the skeleton of a bare AMC path (default: the only
-    ``.asf`` next to it, or ``<subject>.asf`` for ``<subject>_<trial>.amc``).
+    SMPL joint -> rig joint (or blend), or the path of a mapping JSON file
+    (:mod:`physmotion.io.mapping`), whose units, up axis and fps rank just after the arguments;
+    asf: the skeleton of a bare AMC path (default: the only ``.asf`` next to it, or
+    ``<subject>.asf`` for ``<subject>_<trial>.amc``).
     Every failure is a :class:`PhysmotionError` with a one-line message naming the file.
     """
     return import_clip_with_report(
@@ -131,6 +134,8 @@ def import_clip(
     )[0]
 
 
+# Overflowing numbers in a file end as one error line (non-finite joints are refused), not numpy warnings.
+@np.errstate(all="ignore")
 def import_clip_with_report(
     info_or_path: ClipInfo | str | Path,
     *,
@@ -138,7 +143,7 @@ def import_clip_with_report(
     fps: float | None = None,
     up_axis: str | None = None,
     units: str | float | None = None,
-    mapping: Mapping[str, JointSource] | None = None,
+    mapping: Mapping[str, JointSource] | str | Path | None = None,
     asf: str | Path | None = None,
     drop_tpose: bool = True,
 ) -> tuple[Motion, ImportReport]:
@@ -146,18 +151,25 @@ def import_clip_with_report(
     info = info_or_path if isinstance(info_or_path, ClipInfo) else None
     path = Path(info.path if info else info_or_path)
     try:
+        if isinstance(mapping, (str, Path)):  # a mapping file: its settings rank after the arguments
+            loaded = load_mapping(mapping)
+            mapping, units = loaded.joints, _first(units, loaded.units)
+            up_axis, fps = _first(up_axis, loaded.up_axis), _first(fps, loaded.fps)
         fmt = info.format if info else path.suffix.lower().lstrip(".")
         table = _resolve_table(rig, mapping, info, fmt)
+        skeleton: str | Path = ""
         if fmt == "bvh":
             motion = read_bvh(path, keep=table.nodes() if table else None)
         elif fmt == "amc":
-            motion = read_amc(path, asf or (info.skeleton if info else _find_asf(path)))
+            skeleton = asf or (info.skeleton if info else _find_asf(path))
+            motion = read_amc(path, skeleton, table.nodes() if table else None)
         else:
             raise MotionFormatError(f"unknown motion format {fmt!r} (expected .bvh or .amc)")
         table = table or _detect_table(motion, units)
+        _check_fits(table, motion, path, skeleton, mapping is not None)
         rate = _first(fps, info.fps if info else None, motion.fps)
         if rate is None:
-            raise PhysmotionError("the file has no frame rate: pass fps=")
+            raise PhysmotionError("the file has no frame rate: give --fps")
         metres = _first(
             parse_units(units) if units is not None else None,
             table.units,
@@ -165,7 +177,7 @@ def import_clip_with_report(
             parse_units(info.units) if info else None,
         )
         if metres is None:
-            raise PhysmotionError(f"units unknown for rig {table.name!r}: pass units=")
+            raise PhysmotionError(f"units unknown for rig {table.name!r}: give --units")
         up = _first(up_axis.upper() if up_axis else None, table.up_axis, info.up_axis if info else None, "Y")
         canon = canonicalize(
             motion, table, float(rate), units=float(metres), up_axis=str(up), drop_tpose=drop_tpose
@@ -203,13 +215,43 @@ def _resolve_table(
     if isinstance(rig, RigTable):
         return rig
     if mapping is not None:
-        return table_from_mapping(mapping, name=rig or "custom")
+        if rig is not None:
+            raise PhysmotionError(f"give a rig ({rig!r}) or a mapping, not both")
+        return table_from_mapping(mapping, name="mapping")
     name = rig or (info.skeleton if info and fmt == "bvh" else None) or ("cmu_asf" if fmt == "amc" else None)
     if name is None:
         return None
     if name not in RIGS:
-        raise PhysmotionError(f"unknown rig {name!r} (known: {', '.join(RIGS)}; or pass mapping=)")
+        raise PhysmotionError(
+            f"unknown rig {name!r} (known: {', '.join(RIGS)}; `physmotion import --rig list` describes "
+            "them; for another rig write its joints in a JSON file and give --mapping map.json)"
+        )
     return RIGS[name]
+
+
+def _check_fits(table: RigTable, motion: RigMotion, path: Path, asf: str | Path, is_mapping: bool) -> None:
+    """Raise naming each of our joints whose rig joint the file lacks, and the file's joints.
+
+    asf: the skeleton of an AMC file, "" for BVH.
+    """
+    have = set(motion.names)
+    lacking = [
+        (joint, node)
+        for joint, src in table.joints.items()
+        for node in ((src,) if isinstance(src, str) else tuple(n for n, _ in src))
+        if node not in have
+    ]
+    if not lacking:
+        return
+    # the motion was read pruned to the table's joints: list the file's own
+    names = tuple(read_asf(asf).bones) if asf else bvh_joint_names(path)
+    label = "mapping:" if is_mapping else f"rig {table.name} does not fit this file:"
+    pairs = ", ".join(f"{joint} -> {node!r}" for joint, node in lacking[:3])
+    more = f" and {len(lacking) - 3} more" if len(lacking) > 3 else ""
+    shown = ", ".join(n[:40] for n in names[:12])
+    if len(names) > 12:
+        shown += f", ... ({len(names)} in all)"
+    raise PhysmotionError(f"{label} {pairs}{more} not found in {path.name} (joints: {shown})")
 
 
 def _detect_table(motion: RigMotion, units: str | float | None) -> RigTable:
@@ -217,11 +259,12 @@ def _detect_table(motion: RigMotion, units: str | float | None) -> RigTable:
     fits = [t for t in RIGS.values() if t.nodes() <= set(motion.names)]
     if not fits:
         raise PhysmotionError(
-            f"unknown rig (joints {', '.join(motion.names[:4])}, ...): pass rig= or mapping="
+            f"unknown rig (joints {', '.join(motion.names[:4])}, ...): give --rig NAME (see --rig list) "
+            "or --mapping map.json"
         )
     if len({t.units for t in fits}) > 1 and units is None:
         listed = ", ".join(t.name for t in fits)
-        raise PhysmotionError(f"rig is one of {listed}, which differ in units: pass rig= or units=")
+        raise PhysmotionError(f"rig is one of {listed}, which differ in units: give --rig or --units")
     return fits[0]
 
 
@@ -233,4 +276,4 @@ def _find_asf(amc: Path) -> Path:
     candidates = sorted(amc.parent.glob("*.asf")) if amc.parent.is_dir() else []
     if len(candidates) == 1:
         return candidates[0]
-    raise MotionFormatError(f"{amc}: cannot tell which .asf skeleton goes with it: pass asf=")
+    raise MotionFormatError(f"{amc}: cannot tell which .asf skeleton goes with it: give --asf")

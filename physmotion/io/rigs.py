@@ -146,6 +146,7 @@ class RigTable:
     units: metres per file unit, or None to take it from the file (an ASF's ``:units length``).
     up_axis: the world up axis of the file's *animated* frames ("X", "Y" or "Z"), or None to take
     it from the manifest or the caller (default Y).
+    source: where the convention comes from (a few words, for ``physmotion import --rig list``).
     """
 
     name: str
@@ -153,6 +154,7 @@ class RigTable:
     units: float | None
     up_axis: str | None = "Y"
     note: str = ""
+    source: str = ""
 
     def __post_init__(self) -> None:
         missing = [j for j in JOINT_NAMES if j not in self.joints]
@@ -297,12 +299,22 @@ RIGS: Mapping[str, RigTable] = MappingProxyType(
     {
         t.name: t
         for t in (
-            RigTable("bandai", _sided(_BANDAI, "L", "R"), units=_CM, up_axis="Y"),
-            RigTable("cmu_bvh_cgspeed_max", _sided(_CGSPEED, "Left", "Right"), units=_CMU_UNIT, up_axis="Y"),
             RigTable(
-                "cmu_bvh_cgspeed_max_scaled_m", _sided(_CGSPEED, "Left", "Right"), units=1.0, up_axis="Y"
+                "bandai", _sided(_BANDAI, "L", "R"), units=_CM, up_axis="Y",
+                source="Bandai Namco Research Motiondataset BVH (Hips, UpperLeg_L, ...)",
             ),
-            RigTable("cmu_asf", _sided(_CMU_ASF, "l", "r"), units=None, up_axis="Y"),
+            RigTable(
+                "cmu_bvh_cgspeed_max", _sided(_CGSPEED, "Left", "Right"), units=_CMU_UNIT, up_axis="Y",
+                source="CMU mocap, cgspeed's 3dsMax-friendly BVH (Hips, LeftHip, ...)",
+            ),
+            RigTable(
+                "cmu_bvh_cgspeed_max_scaled_m", _sided(_CGSPEED, "Left", "Right"), units=1.0, up_axis="Y",
+                source="the same CMU cgspeed BVH rescaled to metres (bvh11's scaled_*.bvh)",
+            ),
+            RigTable(
+                "cmu_asf", _sided(_CMU_ASF, "l", "r"), units=None, up_axis="Y",
+                source="CMU's original ASF/AMC (root, lfemur, ...)",
+            ),
             RigTable(
                 "cmu_iclone_cc_base",
                 _sided(_ICLONE, "L", "R"),
@@ -310,14 +322,28 @@ RIGS: Mapping[str, RigTable] = MappingProxyType(
                 up_axis="Y",
                 note="The rest pose is Z-up (CC_Base_Hip OFFSET 0 0 105), but the root's animated "
                 "rotation turns every frame Y-up: the animated world is Y-up, which is what matters.",
+                source="CMU mocap retargeted to iClone's CC_Base rig (CC_Base_Hip, ...)",
             ),
             RigTable(
-                "smpl22", _SMPL22, units=1.0, up_axis="Y", note="our own BVH export (physmotion.io.export)"
+                "smpl22", _SMPL22, units=1.0, up_axis="Y", note="our own BVH export (physmotion.io.export)",
+                source="physmotion's own BVH export (pelvis, left_hip, ...)",
             ),
         )
     }
 )
 """Tables by convention name (the manifest's ``skeleton`` column; ``cmu_asf`` for any CMU ASF)."""
+
+_UNIT_NAMES = {1.0: "m", _CM: "cm", _CMU_UNIT: "CMU units (1/0.45 inch)"}
+
+
+def describe_rig(table: RigTable) -> str:
+    """One line about a rig table: its units, up axis and source."""
+    if table.units is None:
+        units = "units from the file"
+    else:
+        units = _UNIT_NAMES.get(table.units, f"{table.units:g} m per unit")
+    up = f"{table.up_axis} up" if table.up_axis else "up axis from the file"
+    return f"{units}, {up}; {table.source or table.note or 'custom'}"
 
 
 def parse_units(text: str | float) -> float:

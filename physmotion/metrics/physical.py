@@ -235,6 +235,24 @@ def _prepare(
     return _Batch(arr, lens, float(fps), DEFAULT_BODY if body is None else body, params)
 
 
+def foot_contacts(
+    joints: np.ndarray, body: BodySurface | None = None, params: MetricParams = PARAMS
+) -> np.ndarray:
+    """Which foot joints touch the floor, by the rule Skate uses: (..., T, 22, 3) -> (..., T, 4) bool.
+
+    FOOT_JOINTS order (left ankle, left foot, right ankle, right foot): a joint is in contact when its
+    contact patch (heel, toes) on ``body`` (default: the joint-only surface model) is within
+    ``params.tolerance`` of the floor. Previews and the viewer mark the same contacts the metrics count.
+    """
+    body = DEFAULT_BODY if body is None else body
+    return _in_contact(np.asarray(body.foot_heights(np.asarray(joints, dtype=np.float64))), params)
+
+
+def _in_contact(feet: np.ndarray, params: MetricParams) -> np.ndarray:
+    """feet: (..., 4) contact patch heights, metres -> (..., 4) bool."""
+    return feet <= params.tolerance
+
+
 # ------------------------------------------------------------------------------------------------
 # Per-motion values, one function per metric: (batch) -> (B,)
 
@@ -250,7 +268,7 @@ def _float(b: _Batch) -> np.ndarray:
 
 
 def _skate(b: _Batch) -> np.ndarray:
-    contact = b.feet <= b.params.tolerance  # (B, T, 4)
+    contact = _in_contact(b.feet, b.params)  # (B, T, 4)
     both = contact[:, :-1] & contact[:, 1:]
     feet = b.joints[:, :, list(FOOT_JOINTS)][..., _HORIZONTAL]
     disp = np.linalg.norm(np.diff(feet, axis=1), axis=-1) * 1000.0 * b.per_frame_rate()  # (B, T-1, 4)

@@ -42,6 +42,7 @@ from physmotion.skeleton import (
     JOINT_NAMES,
     NUM_JOINTS,
     REST_OFFSETS,
+    check_bone_lengths,
     children,
     offsets_from_joints,
 )
@@ -393,8 +394,7 @@ def _check_offsets(offsets: np.ndarray) -> np.ndarray:
         raise ShapeError(f"offsets must have shape ({NUM_JOINTS}, 3), got {offsets.shape}")
     if not np.all(np.isfinite(offsets)):
         raise ShapeError("offsets contain NaN or infinite values")
-    if np.any(np.linalg.norm(offsets[1:], axis=-1) < 1e-4):
-        raise ShapeError("offsets contain a zero-length bone")
+    check_bone_lengths(offsets)
     return offsets
 
 

@@ -20,11 +20,12 @@ from typing import Protocol
 
 import torch
 
+from physmotion.conventions import MAX_TEXT_TOKENS
 from physmotion.errors import PhysmotionError
 
 DEFAULT_ENCODER = "minilm"
 MINILM_DIM = 384  # width of the default encoder's token and sentence vectors (all-MiniLM-L6-v2)
-MAX_TOKENS = 32  # our captions are short; HumanML3D's are under 30 words
+MAX_TOKENS = MAX_TEXT_TOKENS  # longer captions are truncated (generate warns)
 
 
 @dataclass
@@ -91,6 +92,11 @@ class HFTextEncoder:
             tok = hidden[i, mask[i]].float().clone()
             pooled = torch.nn.functional.normalize(tok.mean(0), dim=0)
             self._cache[text] = (tok, pooled)
+
+    def count_tokens(self, text: str) -> int:
+        """Tokens of ``text`` as the encoder would read it untruncated (special tokens included); only
+        the first ``max_tokens`` are encoded."""
+        return len(self.tokenizer(text, truncation=False)["input_ids"])
 
     def encode(self, texts: Sequence[str]) -> TextFeatures:
         """Encode captions (cached by exact text). An empty caption is an error: use CFG's null text."""

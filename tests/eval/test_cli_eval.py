@@ -38,4 +38,4 @@ def test_train_evaluator_one_epoch(built_dir, tmp_path):
     assert res.returncode == 0, res.stderr
     assert "test R@1" in res.stdout and (out / "model.safetensors").is_file()
     again = run("train", "evaluator", "--data", built_dir, "--out", out, "--epochs", "1")
-    assert again.returncode == 1 and "already holds a model" in again.stderr
+    assert again.returncode == 1 and "is a folder that is not empty" in again.stderr

@@ -1,0 +1,92 @@
+"""What ``physmotion metrics`` prints or writes: one column (or row) per file, labelled so that files of
+the same name in different folders stay apart, as a table that fits the terminal, JSON or CSV."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+from rich.console import Console
+from rich.table import Table
+
+from physmotion.errors import PhysmotionError
+from physmotion.metrics.physical import METRICS, format_table
+
+
+def path_labels(paths: Sequence[str | Path]) -> list[str]:
+    """One label per path: its shortest trailing part that no other path shares.
+
+    ``a/x.npz, b/x.npz, c/y.npz`` -> ``a/x.npz, b/x.npz, y.npz``. The same path given twice gets
+    ``#2``, ``#3`` appended, so every argument keeps its own label.
+    """
+    parts = [Path(os.path.normpath(p)).parts for p in paths]
+    labels = []
+    for i, own in enumerate(parts):
+        for k in range(1, len(own) + 1):
+            tail = own[-k:]
+            if all(other[-k:] != tail for j, other in enumerate(parts) if j != i):
+                break
+        labels.append(str(Path(*tail)))
+    seen: dict[str, int] = {}
+    for i, label in enumerate(labels):
+        seen[label] = seen.get(label, 0) + 1
+        if seen[label] > 1:
+            labels[i] = f"{label}#{seen[label]}"
+    return labels
+
+
+def check_npz(path: str | Path) -> Path:
+    """``path`` if it names an .npz; a one-line PhysmotionError for any other file (a .bvh, say)."""
+    path = Path(path)
+    if path.suffix.lower() != ".npz":
+        raise PhysmotionError(f"{path}: metrics expects .npz; run `physmotion import` first")
+    return path
+
+
+def fit_table(results: Mapping[str, Mapping[str, float]], title: str, width: int) -> tuple[Table, list[str]]:
+    """The metrics table for a terminal ``width`` columns wide, and the lines of a legend under it.
+
+    Columns are labelled by ``results``' keys where the table fits; otherwise by ``#1``, ``#2`` ... with
+    the legend naming each (and, if that is still too wide, without the paper column), so a rich table
+    never cuts a file name short. A table too wide even then is
+    returned as is: print it with no width limit (``table_width``).
+    """
+    table = format_table(results, title=title)
+    if table_width(table) <= width:
+        return table, []
+    numbered = {f"#{i + 1}": r for i, r in enumerate(results.values())}
+    legend = [f"#{i + 1}  {label}" for i, label in enumerate(results)]
+    table = format_table(numbered, title=title)
+    if table_width(table) > width:
+        table.columns.pop(2)  # the "paper" column (rich keeps cells in their column); --json has it
+    return table, legend
+
+
+def table_width(table: Table) -> int:
+    """Columns ``table`` needs to print without squeezing any cell."""
+    console = Console(width=100_000, file=io.StringIO())
+    return console.measure(table).maximum
+
+
+def to_json(results: Mapping[str, Mapping[str, float]], paths: Sequence[str | Path], surface: str) -> str:
+    """``{"surface", "units", "files": [{"label", "path", "metrics"}]}`` as indented JSON."""
+    files = [{"label": label, "path": str(path), "metrics": dict(r)}
+             for (label, r), path in zip(results.items(), paths)]  # fmt: skip
+    units = {name: METRICS[name].unit for name in METRICS if any(name in r for r in results.values())}
+    return json.dumps({"surface": surface, "units": units, "files": files}, indent=2) + "\n"
+
+
+def to_csv(results: Mapping[str, Mapping[str, float]], paths: Sequence[str | Path]) -> str:
+    """One row per file: ``label, path`` and one column per metric (its name, units in the JSON)."""
+    names = [m for m in METRICS if any(m in r for r in results.values())]
+    names += sorted({k for r in results.values() for k in r} - set(METRICS))
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(["label", "path", *names])
+    for (label, r), path in zip(results.items(), paths):
+        writer.writerow([label, str(path), *(repr(float(r[n])) if n in r else "" for n in names)])
+    return buf.getvalue()

@@ -1,0 +1,105 @@
+"""`physmotion view` in a real browser: the page loads offline in headless Chromium with no console
+message from the page, and shows the figures on the floor, moving with time."""
+
+import json
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from physmotion.motion import Motion
+
+BANDAI_WALK = "bandai/Bandai-Namco-Research-Motiondataset-2/data/dataset-2_walk_normal_001.bvh"
+CLI = Path(sys.executable).parent / "physmotion"
+# SwiftShader's notes about reading back its own frames (the screenshot), not messages of the page.
+DRIVER_NOTE = "GL Driver Message (OpenGL, Performance"
+
+
+def chromium(url: str, profile: Path, *action: str) -> tuple[str, list[str]]:
+    """Run headless Chromium on ``url`` with one action (--dump-dom, --screenshot=...); returns (stdout,
+    the console messages of the page)."""
+    exe = shutil.which("chromium")
+    if exe is None:
+        pytest.fail("chromium is not installed: `make test` installs it (apt-get install chromium)")
+    flags = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+             "--disable-background-networking", "--disable-component-update", "--disable-sync",
+             f"--user-data-dir={profile}", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+             "--enable-logging=stderr", "--v=0", "--window-size=900,600", "--virtual-time-budget=4000"]  # fmt: skip
+    res = subprocess.run(
+        [exe, *flags, *action, url], capture_output=True, text=True, timeout=120, check=False
+    )
+    assert res.returncode == 0, res.stderr[-2000:]
+    console = [line for line in res.stderr.splitlines() if ":CONSOLE" in line and DRIVER_NOTE not in line]
+    return res.stdout, console
+
+
+def _figure_centre(path: Path) -> tuple[np.ndarray, int]:
+    """Centroid (x, y) of the coloured (figure) pixels of the 3-D view, and their count; the legend
+    (top left) and the control bar (bottom) are left out."""
+    pixels = np.asarray(Image.open(path).convert("RGB")).astype(int)[90:560]
+    coloured = (pixels.max(axis=-1) - pixels.min(axis=-1)) > 60  # the floor, background and text are grey
+    ys, xs = np.nonzero(coloured)
+    return np.array([xs.mean(), ys.mean()]), int(coloured.sum())
+
+
+def test_view_page_plays_a_walk_in_headless_chromium(mocap_dir: Path, tmp_path: Path) -> None:
+    walk = tmp_path / "walk.npz"
+    res = subprocess.run([CLI, "import", mocap_dir / BANDAI_WALK, "-o", walk, "--rig", "bandai", "--fps", "30"],
+                         capture_output=True, text=True, check=False)  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    page = tmp_path / "view.html"
+    res = subprocess.run([CLI, "view", walk, "-o", page], capture_output=True, text=True, check=False)
+    assert res.returncode == 0, res.stderr
+    text = page.read_text()
+    # Self-contained: no external script, style or fetch.
+    assert not re.search(r"<(script|link|img)[^>]+(src|href)=", text)
+    data = json.loads(
+        re.search(r'<script id="motion-data" type="application/json">(.*?)</script>', text, re.DOTALL)[1]
+    )
+    motion = Motion.load(walk)
+    assert data["frames"] == motion.num_frames and data["fps"] == motion.fps
+    joints = np.array(data["motions"][0]["joints"]).reshape(-1, 22, 3) / 1000
+    offset = data["motions"][0]["offset"]
+    assert np.abs(joints - motion.joints - [offset, 0, 0]).max() <= 0.0011  # mm, and the offset to 1 mm
+
+    url = page.as_uri()
+    dom, console = chromium(url + "?t=0.5&follow=0", tmp_path / "p0", "--dump-dom")
+    assert console == []
+    assert re.search(r'<div id="status" data-state="ready" data-frame="10">', dom), dom[-3000:]
+    assert "0.50 / 9.05 s" in dom
+
+    shots = []
+    for t in (0.5, 1.5):
+        shot = tmp_path / f"t{t}.png"
+        _, console = chromium(f"{url}?t={t}&follow=0", tmp_path / f"p{t}", f"--screenshot={shot}")
+        assert console == []
+        assert Image.open(shot).size == (900, 600)
+        shots.append(shot)
+    (c1, n1), (c3, n3) = _figure_centre(shots[0]), _figure_centre(shots[1])  # 1.2 m apart
+    assert n1 > 1000 and n3 > 1000, (n1, n3)  # a figure is drawn at both times
+    # The walk heads for +Z, toward the fixed camera: the figure comes down the picture and grows.
+    assert c3[1] - c1[1] > 30 and n3 > n1, (c1, c3, n1, n3)
+    floor = np.asarray(Image.open(shots[0]).convert("RGB")).astype(int)[300:560]
+    grey_lines = (np.abs(floor - 189).max(axis=-1) < 12).sum()  # the 0.5 m grid's line colour (0xbdbdb8)
+    assert grey_lines > 2000, grey_lines
+
+
+def test_a_broken_page_is_caught(tmp_path: Path) -> None:
+    """The checks above can fail: a page whose script throws shows up in the console and the status."""
+    from physmotion.render import make_tracks
+    from physmotion.skeleton import rest_joints
+    from physmotion.viewer import view_html
+
+    motion = Motion(joints=np.repeat(rest_joints()[None], 10, axis=0), fps=20.0)
+    tracks, fps = make_tracks([motion], ["rest"])
+    text = view_html(tracks, fps).replace('"parents":[', '"parents":[[')  # JSON the viewer cannot parse
+    page = tmp_path / "broken.html"
+    page.write_text(text)
+    dom, console = chromium(page.as_uri(), tmp_path / "profile", "--dump-dom")
+    assert any("Uncaught SyntaxError" in line for line in console), console
+    assert 'data-state="error"' in dom
