@@ -2,6 +2,7 @@
 model: one table from one run.
 
 Usage: python bench/physdiff_quality.py [--model DIR] [--prompts 32] [--seeds 0,1,2] [--json FILE]
+       python bench/physdiff_quality.py --set new [--model DIR] [--seeds 0] [--json FILE]
 (--json also writes every mode's metrics per seed, e.g. results/physdiff_quality.json, which the README
 quotes and tests/test_results.py checks it against.)
 Rows: none (as sampled), none+floor (each motion moved vertically by the constant shift that leaves it the
@@ -12,6 +13,9 @@ simulated for projected outputs (PhysDiff's Penetrate/Float/Skate/Phys-Err, mm),
 because one seed's 32 motions move the ratio by about a point. "no fall": projections (all of them,
 PhysDiff's four per motion included) in which the humanoid never fell; "reset": outputs with at least one
 reset (a jump back onto the motion), and resets per output.
+``--set new`` runs the prompts written from scratch (``NEW_PROMPTS``: runs, jogs, jumps, hops, kicks,
+turns, dances, gestures, standing; none a caption of our data) with Morph's inference mode added, one row
+per category and mode, so that runs and jumps read on their own.
 """
 
 from __future__ import annotations
@@ -25,11 +29,12 @@ from rich.table import Table
 
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.eval.physics_modes import compare_modes
-from physmotion.eval.prompts import PHYSICS_PROMPTS
+from physmotion.eval.prompts import NEW_PROMPTS, PHYSICS_PROMPTS
 from physmotion.generate import GenerateConfig
 from physmotion.motion import write_atomic
 
 MODES = ("none", "none+floor", "post:1", "post:4", "physdiff:end:4,space:1")
+NEW_SET_MODES = ("none", "none+floor", "post:1", "physdiff:end:4,space:1", "morph")
 COLUMNS = ("penetrate", "float", "skate", "phys_err")
 
 
@@ -39,9 +44,14 @@ def main() -> None:
     parser.add_argument("--prompts", type=int, default=32)
     parser.add_argument("--seeds", default="0,1,2", help="comma-separated sampling seeds")
     parser.add_argument("--json", default=None, help="also write the per-seed metrics to this file")
+    parser.add_argument("--set", choices=("physics", "new"), default="physics",
+                        help="physics: the 32 prompts in our captions' words; new: the unseen prompts by category")
     args = parser.parse_args()
     seeds = [int(s) for s in args.seeds.split(",")]
     model = MotionDiffusion.load(args.model)
+    if args.set == "new":
+        _new_prompts(model, seeds, args.json)
+        return
     prompts = PHYSICS_PROMPTS[: args.prompts]
     runs = [compare_modes(model, prompts, MODES, GenerateConfig(seed=seed)) for seed in seeds]
     table = Table(title=f"physics modes, {len(prompts)} prompts, 6 s each, mean over seeds {args.seeds}")
@@ -66,6 +76,35 @@ def main() -> None:
         runs = [{m: {k: (None if np.isnan(v) else v) for k, v in row.items()} for m, row in run.items()}
                 for run in runs]  # strict JSON: no NaN (the unprojected rows have no fall counts)
         write_atomic(args.json, lambda f: f.write(json.dumps({"meta": meta, "runs": runs}, indent=2)), "w")
+
+
+def _new_prompts(model: MotionDiffusion, seeds: list[int], json_path: str | None) -> None:
+    """One row per category and mode of NEW_PROMPTS (means over the category's prompts and the seeds)."""
+    runs = {cat: [compare_modes(model, list(prompts), NEW_SET_MODES, GenerateConfig(seed=seed)) for seed in seeds]
+            for cat, prompts in NEW_PROMPTS.items()}  # fmt: skip
+    table = Table(title=f"unseen prompts ({sum(map(len, NEW_PROMPTS.values()))}), 6 s each, seeds "
+                  f"{','.join(map(str, seeds))}, model steps {model.info.get('steps')}")  # fmt: skip
+    for col in ("category", "mode", "Penetrate", "Float", "Skate", "Phys-Err", "vs none", "vs none+floor",
+                "reset", "imitation failed", "s/motion"):
+        table.add_column(col, justify="left" if col in ("category", "mode") else "right")
+    for cat, cat_runs in runs.items():
+        mean = {m: {k: float(np.mean([r[m].get(k, np.nan) for r in cat_runs]))
+                    for k in (*COLUMNS, "reset_rate", "imitation_failure_rate", "seconds_per_motion")}
+                for m in NEW_SET_MODES}  # fmt: skip
+        for mode in NEW_SET_MODES:
+            row = mean[mode]
+            changes = [f"{100 * (row['phys_err'] / mean[b]['phys_err'] - 1):+.0f}%" for b in ("none", "none+floor")]
+            rates = [f"{100 * row[k]:.0f}%" if np.isfinite(row[k]) else "-"
+                     for k in ("reset_rate", "imitation_failure_rate")]  # fmt: skip
+            table.add_row(cat, mode, *(f"{row[k]:.2f}" for k in COLUMNS), *changes, *rates,
+                          f"{row['seconds_per_motion']:.2f}")
+    Console(width=160, emoji=False).print(table)
+    if json_path:
+        clean = {cat: [{m: {k: (None if np.isnan(v) else v) for k, v in row.items()} for m, row in run.items()}
+                       for run in cat_runs] for cat, cat_runs in runs.items()}  # fmt: skip
+        meta = {"set": "new", "prompts": {c: list(p) for c, p in NEW_PROMPTS.items()}, "seeds": seeds,
+                "model_steps": model.info.get("steps"), "model_info": model.info.get("morph", {})}
+        write_atomic(json_path, lambda f: f.write(json.dumps({"meta": meta, "runs": clean}, indent=2)), "w")
 
 
 if __name__ == "__main__":

@@ -20,6 +20,18 @@ WEIGHTS_FILE = "model.safetensors"
 CONFIG_FILE = "config.json"
 
 
+def weights_sha256(folder: str | Path) -> str:
+    """Hex sha256 of a model folder's weights file: the identity of a model (Morph's synthetic sets name
+    the model that made them by it)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    with open(Path(folder) / WEIGHTS_FILE, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
 def save_folder(folder: str | Path, net: torch.nn.Module, normalizer: Normalizer, config: dict) -> None:
     """Write ``net``'s weights with ``normalizer.mean``/``normalizer.std`` and ``config`` atomically."""
     from safetensors.torch import save

@@ -268,9 +268,10 @@ def generate_cmd(
         "model's range: another model may allow less) (default: 6)."),
     physics: str | None = typer.Option(
         None, help="none, none+floor (plain sampling, shifted onto the floor as well as a constant "
-        "shift can), post[:K] (K projections after sampling) or physdiff[:SCHEDULE] (projection "
-        "inside sampling; SCHEDULE uniform:N, start:M,end:N or end:N,space:S) "
-        "(default: physdiff:end:4,space:1)."),
+        "shift can), post[:K] (K projections after sampling), physdiff[:SCHEDULE] (projection "
+        "inside sampling; SCHEDULE uniform:N, start:M,end:N or end:N,space:S) or morph (one projection "
+        "after sampling that keeps the sampled motion where the humanoid fails to imitate it, Morph's "
+        "inference) (default: physdiff:end:4,space:1)."),
     num: int | None = typer.Option(None, help="Samples per caption (default: 1)."),
     seed: int | None = typer.Option(None, help="Random seed; the same seed gives the same motions (default: 0)."),
     sampler: str | None = typer.Option(None, help="ddim, ddpm or dpmpp (DPM-Solver++ 2M, Karras) (default: ddim)."),
@@ -432,7 +433,7 @@ def evaluate_cmd(
     evaluator: Path | None = typer.Option(None, help="Evaluator folder; the shipped one if left out."),
     split: str | None = typer.Option(None, help="Split to evaluate on (default: test)."),
     physics: str | None = typer.Option(
-        None, help="Comma-separated modes: none, none+floor, post:K, physdiff:<schedule> "
+        None, help="Comma-separated modes: none, none+floor, post:K, physdiff:<schedule>, morph "
         "(default: none,none+floor,post:1,post:4,physdiff:end:4,space:1)."),
     repeats: int | None = typer.Option(
         None, help="Repeated generation runs (95% intervals over them) (default: 3)."),
@@ -504,6 +505,105 @@ def view_cmd(
     console.print(f"wrote {out}: {done.frames} frames at {done.fps:g} fps, {done.bytes / 1e6:.1f} MB; "
                   "open it in a browser", highlight=False)  # fmt: skip
 
+
+# morph commands
+morph_app = typer.Typer(help="Morph: synthetic motions refined by physics, selected, and fine-tuned on.",
+                        no_args_is_help=True, context_settings=HELP)  # fmt: skip
+app.add_typer(morph_app, name="morph")
+
+
+@morph_app.command("synth")
+def morph_synth_cmd(
+    data: Path = typer.Option(..., help="HumanML3D-layout folder whose train captions are generated."),
+    out: Path = typer.Option(..., "-o", "--out", help="Synthetic data folder; an unfinished run of the same "
+                             "model and settings there is continued."),
+    model: Path | None = typer.Option(None, help="Model folder; the shipped model if left out."),
+    per_caption: int | None = typer.Option(None, "--per-caption", help="Samples per train caption (default: 1)."),
+    seed: int | None = typer.Option(None, help="Random seed of noise and lengths (default: 0)."),
+    workers: int | None = typer.Option(None, help="Physics worker processes (0: one per core) (default: 0)."),
+) -> None:
+    """Generate motions for every train caption and refine each with the physics projection P (Morph)."""
+    from physmotion.morph.synth import SynthConfig, synthesize
+
+    cfg = _with(SynthConfig(), per_caption=per_caption, seed=seed, workers=workers)
+    report = synthesize(model, data, out, cfg, progress=sys.stderr.isatty())
+    console.print(f"{out}: {report.done} new item(s), {report.total_done}/{report.planned} done in "
+                  f"{report.seconds:.0f} s (sampling {report.sampling_seconds:.0f} s, physics "
+                  f"{report.physics_seconds:.0f} s)", highlight=False)  # fmt: skip
+
+
+@morph_app.command("select")
+def morph_select_cmd(
+    synth: Path = typer.Argument(..., help="A synthetic data folder made by 'physmotion morph synth'."),
+    tau: float = typer.Option(0.5, help="MPJPE threshold in metres (Morph: 0.5)."),
+) -> None:
+    """Morph's imitation selection: refined motion where P imitated it, else the generated input."""
+    from physmotion.morph.selection import select
+
+    sel = select(synth, tau=tau)
+    c = sel.counts
+    console.print(f"{c['items']} item(s): {c['refined']} refined, {c['input']} input; IFR {sel.ifr:.3f} "
+                  f"({c['failed']} of {c['grounded']} grounded refinements rejected, {c['episode_failed']} "
+                  f"fell); non-grounded captions (kept as input, not in IFR): {c['non_grounded']}",
+                  highlight=False)  # fmt: skip
+
+
+@morph_app.command("finetune")
+def morph_finetune_cmd(
+    model: Path = typer.Option(..., help="Model folder to fine-tune (the one that made --synth)."),
+    synth: Path = typer.Option(..., help="Synthetic data folder made by 'physmotion morph synth' with --model."),
+    data: Path = typer.Option(..., help="HumanML3D-layout folder whose train split is mixed in."),
+    out: Path = typer.Option(..., "-o", "--out", help="Run folder: model, train_state.pt, loss.csv. Must be "
+                             "new or empty, unless --resume continues the run in it."),
+    mix: float | None = typer.Option(None, help="Share of synthetic motions in each batch (default: 0.5)."),
+    lr: float | None = typer.Option(None, help="AdamW learning rate (Morph: 1e-5) (default: 1e-05)."),
+    steps: int | None = typer.Option(None, help="Fine-tuning optimiser steps (default: 2000)."),
+    batch_size: int | None = typer.Option(None, help="Batch size (default: the model's training run's)."),
+    tau: float | None = typer.Option(None, help="Imitation selection threshold, metres (default: 0.5)."),
+    seed: int | None = typer.Option(None, help="Seed of data order and noise (default: 0)."),
+    resume: bool = typer.Option(False, "--resume", help="Continue the run in --out where it stopped."),
+) -> None:
+    """Morph's Stage 2: fine-tune a model on its physics-refined synthetic motions mixed with real ones."""
+    from physmotion.morph.finetune import FinetuneConfig, finetune
+    from physmotion.paths import check_output
+
+    check_output(out, "folder", overwrite=resume, hint="pass --resume to continue its run, or choose another -o")
+    cfg = _with(FinetuneConfig(model=str(model), synth=str(synth), data=str(data), out=str(out)), mix=mix, lr=lr,
+                steps=steps, batch_size=batch_size, tau=tau, seed=seed)  # fmt: skip
+    result = finetune(cfg, resume=resume, progress=sys.stderr.isatty())
+    c, last = result.selection.counts, result.train.losses[-1][1] if result.train.losses else float("nan")
+    console.print(f"fine-tuned to step {result.train.step} on {result.synthetic_items} synthetic ({c['refined']} "
+                  f"refined, {c['input']} input, IFR {result.selection.ifr:.3f}) and {result.real_items} real "
+                  f"motions, last loss {last:.4f}; model in {out}", highlight=False)  # fmt: skip
+
+
+@morph_app.command("run")
+def morph_run_cmd(
+    model: Path = typer.Option(..., help="Model folder of round 1."),
+    data: Path = typer.Option(..., help="HumanML3D-layout folder: its train captions and motions."),
+    out: Path = typer.Option(..., "-o", "--out", help="Run folder (round_<k>/synth, round_<k>/model, rounds.md); "
+                             "a run from the same model there is continued, finished rounds skipped."),
+    rounds: int = typer.Option(..., help="Rounds of synthesis, selection and fine-tuning."),
+    per_caption: int | None = typer.Option(None, "--per-caption", help="Samples per train caption (default: 1)."),
+    steps: int | None = typer.Option(None, help="Fine-tuning steps per round (default: 2000)."),
+    mix: float | None = typer.Option(None, help="Share of synthetic motions in each batch (default: 0.5)."),
+    lr: float | None = typer.Option(None, help="Fine-tuning learning rate (default: 1e-05)."),
+    seed: int | None = typer.Option(None, help="Random seed of synthesis and fine-tuning (default: 0)."),
+) -> None:
+    """Morph's multi-round loop: per round, synthesise and refine, select, fine-tune from the last round."""
+    from physmotion.morph.finetune import FinetuneConfig
+    from physmotion.morph.loop import check_run_dir, run_rounds
+    from physmotion.morph.synth import SynthConfig
+    from physmotion.paths import check_output
+
+    check_output(out, "folder", overwrite=True)
+    check_run_dir(out, model)
+    synth_cfg = _with(SynthConfig(), per_caption=per_caption, seed=seed)
+    ft_cfg = _with(FinetuneConfig(model="", synth="", data=str(data), out=""), steps=steps, mix=mix, lr=lr, seed=seed)
+    rows = run_rounds(model, data, out, rounds, synth_cfg, ft_cfg, progress=sys.stderr.isatty())
+    last = rows[-1]
+    console.print(f"{len(rows)} round(s) done; last: IFR {last.ifr:.3f}, loss {last.final_loss:.4f}, model in "
+                  f"{last.model}; table in {out / 'rounds.md'}", highlight=False)  # fmt: skip
 
 def main() -> None:
     """Entry point of the console script: user errors become one line, never a traceback."""

@@ -1,14 +1,18 @@
 """Text in, physically plausible motion out: the product's main job, behind ``physmotion generate``.
 
 ``GenerateConfig.physics`` (a :class:`~physmotion.physics_mode.PhysicsMode`, or its spelling) picks how
-physics enters: ``none``, ``none+floor``, ``post[:K]`` or ``physdiff[:SCHEDULE]`` (the default, PhysDiff's
-``end:4,space:1`` of 50 DDIM steps).
+physics enters: ``none``, ``none+floor``, ``post[:K]``, ``physdiff[:SCHEDULE]`` (the default, PhysDiff's
+``end:4,space:1`` of 50 DDIM steps) or ``morph``.
 
 P in generation is :meth:`ProjectionConfig.sampling`: where the humanoid falls (its error passes 0.15 m)
 it is put back on the motion and the simulation goes on (reset-on-fail), so the output is always the
-simulation and never the kinematic input; Morph's imitation selection (keep the input when the
-imitation fails) is not applied here. Every reset is a jump in the output and is counted
+simulation and never the kinematic input. Every reset is a jump in the output and is counted
 (``GenerateResult.resets``, ``generate.json``).
+
+``morph`` is Morph's inference (Sec. 3.3): one P after sampling with Morph's imitation selection
+(``GenerateConfig.morph_projection``, :class:`ProjectionConfig`'s defaults: no reset, tau 0.5 m): where
+the humanoid fails to imitate a motion the sampled motion is kept, and counted as an imitation failure
+(``GenerateResult.imitation_failed``; ``imitation_failure_rate`` in ``generate.json`` and the tables).
 """
 
 from __future__ import annotations
@@ -32,7 +36,7 @@ from physmotion.errors import PhysmotionError
 from physmotion.features.humanml3d import recover_from_ric
 from physmotion.motion import Motion, write_atomic
 from physmotion.physics.projection import ProjectionConfig
-from physmotion.physics_mode import FLOOR, PHYSDIFF, POST, PhysicsMode
+from physmotion.physics_mode import FLOOR, MORPH, PHYSDIFF, POST, PhysicsMode
 
 GENERATE_LOG = "generate.json"
 
@@ -47,6 +51,7 @@ class GenerateConfig:
     sampler: SamplerConfig = field(default_factory=SamplerConfig)
     seed: int = 0
     projection: ProjectionConfig = field(default_factory=ProjectionConfig.sampling)  # P for physdiff and post
+    morph_projection: ProjectionConfig = field(default_factory=ProjectionConfig)  # P with Morph's selection
 
     def __post_init__(self) -> None:
         self.physics = PhysicsMode.parse(self.physics)
@@ -58,6 +63,8 @@ class GenerateResult:
     features: list[np.ndarray]  # (T, 263) un-normalised, one per motion
     projections: ProjectionLog
     resets: list[int] = field(default_factory=list)  # per motion: resets in the projection it came from
+    # morph, per motion: the imitation failed and the sampled motion was kept (empty in the other modes)
+    imitation_failed: list[bool] = field(default_factory=list)
 
     @property
     def bodies(self) -> list[np.ndarray | None]:
@@ -107,7 +114,7 @@ def generate(
     prompts = [t.strip() for t in texts for _ in range(cfg.num)]
     lengths = [int(n) for n in lengths for _ in range(cfg.num)]
     mode = cfg.physics
-    projector = FeatureProjector(model, cfg.projection)
+    projector = FeatureProjector(model, cfg.morph_projection if mode.kind == MORPH else cfg.projection)
     hook_steps = mode.hook_steps(cfg.sampler.steps)
     total = cfg.sampler.steps + mode.projections
     report = (lambda i, n: on_step(i, total)) if on_step else None
@@ -128,6 +135,20 @@ def generate(
             bodies, resets = list(projector.last_bodies), projector.last_resets
             if on_step:
                 on_step(cfg.sampler.steps + k + 1, total)
+    failed: list[bool] = []
+    if mode.kind == MORPH:
+        # Sec. 3.3 "Inference": App. A's pre-processing ("used for training and inference"), one P, and the
+        # imitation selection as post-process. A kept input is the pre-processed motion with its first
+        # frame's lowest point on the floor; it was not simulated on a body, so it has none.
+        from physmotion.morph.preprocess import PreprocessConfig, floor_first_frame, preprocess
+
+        joints = projector.project_joints([preprocess(j, PreprocessConfig()) for j in joints])
+        failed = [not s for s in projector.log.selected[-len(joints):]]
+        joints = [floor_first_frame(j, physical=True) if f else j for j, f in zip(joints, failed)]
+        bodies = [None if f else b for b, f in zip(projector.last_bodies, failed)]
+        resets = projector.last_resets
+        if on_step:
+            on_step(cfg.sampler.steps + 1, total)
     if mode.kind == FLOOR:
         from physmotion.physics.surface import ground_on_surface
 
@@ -139,7 +160,7 @@ def generate(
         for j, p, b, r in zip(joints, prompts, bodies, resets)
     ]
     return GenerateResult(motions=motions, features=list(feats), projections=projector.log,
-                          resets=list(resets))
+                          resets=list(resets), imitation_failed=failed)
 
 
 def slug(text: str, limit: int = 40) -> str:
@@ -248,6 +269,11 @@ def physics_summary(result: GenerateResult) -> str:
     log = result.projections
     if not log.tracked:
         return ""
+    if result.imitation_failed:  # morph: a failed imitation keeps the sampled motion, nothing is reset
+        n, failed = len(result.imitation_failed), int(sum(result.imitation_failed))
+        return (f"the simulated humanoid imitated {n - failed} of {n} motions; "
+                + (f"the other {failed} kept the sampled motion (Morph's imitation selection; imitation "
+                   f"failure rate {failed / n:.2f})" if failed else "none was kept as sampled"))
     falls, resets = len(log.tracked) - sum(log.tracked), sum(result.resets)
     if not falls:
         return f"the simulated humanoid followed the motion without falling in all {len(log.tracked)} " \
@@ -283,7 +309,7 @@ def write_outputs(
     out.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
     motions = []
-    for motion, stem in zip(result.motions, stems):
+    for i, (motion, stem) in enumerate(zip(result.motions, stems)):
         base = out / stem
         motion.save(base.with_suffix(".npz"))
         save_bvh(motion, base.with_suffix(".bvh"))
@@ -296,10 +322,13 @@ def write_outputs(
         written += files
         motions.append({"prompt": motion.texts[0], "sample": int(stem.rsplit("_", 1)[1]),
                         "files": [p.name for p in files], "resets": motion.resets})  # fmt: skip
+        if result.imitation_failed:
+            motions[-1]["imitation_failed"] = result.imitation_failed[i]
     log = result.projections
     settings = asdict(config)
     settings["physics"] = str(config.physics)
     settings["projection"] = reset_settings(config.projection)
+    settings["morph_projection"] = reset_settings(config.morph_projection)
     record = {
         "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "prompts": texts,
@@ -314,6 +343,9 @@ def write_outputs(
         "motions": motions,
         "files": [p.name for p in written],
     }
+    if result.imitation_failed:  # morph: Morph's IFR, the share of motions whose sampled input was kept
+        record["projections"]["imitation_failures"] = int(sum(result.imitation_failed))
+        record["projections"]["imitation_failure_rate"] = float(np.mean(result.imitation_failed))
     runs = _read_log(out / GENERATE_LOG) + [record]
     data = json.dumps({"runs": runs}, indent=2, ensure_ascii=False).encode("utf-8")
     write_atomic(out / GENERATE_LOG, lambda f: f.write(data))

@@ -9,7 +9,11 @@ Spellings (``generate --physics``, ``evaluate --physics`` as a comma list, table
   and the fair baseline for the physics modes;
 - ``post[:K]``: K applications of P after sampling (default 1), the post-processing baseline;
 - ``physdiff[:SCHEDULE]``: PhysDiff's Algorithm 2, P inside sampling at the steps of SCHEDULE
-  (``uniform:N``, ``start:M,end:N`` or ``end:N,space:S``; default ``end:4,space:1``).
+  (``uniform:N``, ``start:M,end:N`` or ``end:N,space:S``; default ``end:4,space:1``);
+- ``morph``: Morph's inference (Sec. 3.3 "Inference"): plain sampling, then one P with Morph's imitation
+  selection (``ProjectionConfig()``: no reset; where the imitation fails, MPJPE past tau = 0.5 m, the
+  sampled motion is kept and counted as an imitation failure). Meant for a Morph fine-tuned model, and
+  runs with any.
 """
 
 from __future__ import annotations
@@ -18,17 +22,17 @@ from dataclasses import dataclass
 
 from physmotion.errors import PhysmotionError
 
-NONE, FLOOR, POST, PHYSDIFF = "none", "none+floor", "post", "physdiff"
-KINDS = (NONE, FLOOR, POST, PHYSDIFF)
+NONE, FLOOR, POST, PHYSDIFF, MORPH = "none", "none+floor", "post", "physdiff", "morph"
+KINDS = (NONE, FLOOR, POST, PHYSDIFF, MORPH)
 DEFAULT_SCHEDULE = "end:4,space:1"  # PhysDiff's choice: the last four of 50 DDIM steps
 MAX_POST_PROJECTIONS = 50
-_USAGE = "use none, none+floor, post[:K] or physdiff[:SCHEDULE]"
+_USAGE = "use none, none+floor, post[:K], physdiff[:SCHEDULE] or morph"
 
 
 @dataclass(frozen=True)
 class PhysicsMode:
-    """A parsed mode. ``projections``: P's applications after sampling (post); ``schedule``: PhysDiff's
-    projection steps (physdiff). ``str(mode)`` gives the canonical spelling back."""
+    """A parsed mode. ``projections``: P's applications after sampling (post; 1 for morph); ``schedule``:
+    PhysDiff's projection steps (physdiff). ``str(mode)`` gives the canonical spelling back."""
 
     kind: str = PHYSDIFF
     projections: int = 0
@@ -39,7 +43,7 @@ class PhysicsMode:
             raise PhysmotionError(f"unknown physics mode {self.kind!r}: {_USAGE}")
         if self.kind == PHYSDIFF and not self.schedule:
             object.__setattr__(self, "schedule", DEFAULT_SCHEDULE)
-        if self.kind == POST and not self.projections:
+        if self.kind in (POST, MORPH) and not self.projections:
             object.__setattr__(self, "projections", 1)
 
     @classmethod
@@ -50,7 +54,7 @@ class PhysicsMode:
         if not isinstance(spec, str):
             raise PhysmotionError(f"bad physics mode {spec!r}: {_USAGE}")
         kind, _, arg = spec.strip().partition(":")
-        if kind in (NONE, FLOOR) and not arg:
+        if kind in (NONE, FLOOR, MORPH) and not arg:
             return cls(kind)
         if kind == POST:
             try:
@@ -75,8 +79,8 @@ class PhysicsMode:
 
     @property
     def projects(self) -> bool:
-        """P is applied (post or physdiff)."""
-        return self.kind in (POST, PHYSDIFF)
+        """P is applied (post, physdiff or morph)."""
+        return self.kind in (POST, PHYSDIFF, MORPH)
 
     def hook_steps(self, steps: int) -> list[int]:
         """Sampling-loop indices at which PhysDiff projects (empty for the other modes); raises

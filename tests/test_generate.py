@@ -165,3 +165,53 @@ def test_a_329d_model_projects_in_its_own_features(imported_clips) -> None:
         assert out.projections.calls >= 1 and out.features[0].shape == (48, FEATURE_DIM_BIOMECH), mode
         assert out.motions[0].joints.shape == (48, 22, 3) and out.bodies[0] is not None, mode
         assert out.motions[0].resets is not None and out.motions[0].resets >= 0
+
+
+def test_morph_mode_is_one_projection_with_imitation_selection(tiny_model) -> None:
+    """morph: plain sampling, App. A's pre-processing, then one P that keeps the (pre-processed) sampled
+    motion where the imitation fails (Morph Sec. 3.3 "Inference"); failures are counted apart from resets."""
+    from physmotion.eval.physics_modes import imitation_columns
+    from physmotion.morph.preprocess import PreprocessConfig, floor_first_frame, preprocess
+    from physmotion.physics_mode import PhysicsMode, parse_modes
+
+    mode = PhysicsMode.parse("morph")
+    assert str(mode) == "morph" and mode.projects and mode.projections == 1 and mode.hook_steps(50) == []
+    assert [str(m) for m in parse_modes("none,morph,post:2")] == ["none", "morph", "post:2"]
+    with pytest.raises(PhysmotionError, match="unknown physics mode"):
+        PhysicsMode.parse("morph:2")
+    cfg = _cfg(physics="morph", num=2)
+    assert not cfg.morph_projection.reset_on_fail and cfg.morph_projection.tau == 0.5
+    morph = generate(["a person walks"], cfg, tiny_model)
+    none = generate(["a person walks"], _cfg(num=2), tiny_model)
+    assert morph.projections.calls == 1 and len(morph.imitation_failed) == 2 and none.imitation_failed == []
+    for m, n, failed, body in zip(morph.motions, none.motions, morph.imitation_failed, morph.bodies):
+        assert failed == (body is None)  # a kept input was not simulated on a body
+        if failed:  # the sampled motion after App. A's pre-processing, its first frame on the floor
+            kept = floor_first_frame(preprocess(n.joints, PreprocessConfig()), physical=True)
+            assert np.allclose(m.joints, kept, atol=1e-5)
+    assert imitation_columns([morph]) == {"imitation_failure_rate": float(np.mean(morph.imitation_failed))}
+    assert imitation_columns([none]) == {}
+
+
+def test_console_script_generate_morph_writes_the_same_files(tmp_path: Path) -> None:
+    """The installed console script, the shipped model: morph writes what the other modes write, and its
+    imitation failures go to generate.json."""
+    import subprocess
+    import sys
+
+    exe = Path(sys.executable).parent / "physmotion"
+    names = {}
+    for mode in ("none", "morph"):
+        out = tmp_path / mode
+        res = subprocess.run([str(exe), "generate", "a person walks forward", "--seconds", "2", "--steps", "5",
+                              "--physics", mode, "-o", str(out)], capture_output=True, text=True, timeout=600,
+                             check=False)  # fmt: skip
+        assert res.returncode == 0, res.stderr
+        names[mode] = sorted(p.name for p in out.iterdir())
+    assert names["morph"] == names["none"]
+    run_log = json.loads((tmp_path / "morph" / "generate.json").read_text())["runs"][-1]
+    assert run_log["settings"]["physics"] == "morph"
+    assert run_log["settings"]["morph_projection"] == {"reset_on_fail": False, "tau": 0.5}
+    assert run_log["projections"]["imitation_failures"] in (0, 1)
+    assert 0.0 <= run_log["projections"]["imitation_failure_rate"] <= 1.0
+    assert isinstance(run_log["motions"][0]["imitation_failed"], bool)

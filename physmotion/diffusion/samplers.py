@@ -61,11 +61,15 @@ def sample(
     hook: X0Hook | None = None,
     hook_steps: Sequence[int] = (),
     on_step: Callable[[int, int], None] | None = None,
+    noise: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Sample normalised features (B, max(lengths), D); frames past each length are padding.
 
     hook / hook_steps: at each loop index i in hook_steps (0 = first, steps-1 = last step), the predicted
     x0 is replaced by hook(x0, lengths) before the scheduler's update. on_step(i, steps) reports progress.
+    noise: the unit-variance starting noise (B, max(lengths), D) to use instead of
+    ``initial_noise(B, max(lengths), D, seed)`` (a caller whose samples must not depend on the batch
+    they are drawn in, e.g. Morph's synthetic data, seeds each row itself).
     """
     cfg = config or SamplerConfig()
     cfg.check()
@@ -81,7 +85,10 @@ def sample(
     b, width = len(texts), max(lengths)
     mask = (torch.arange(width)[None] < torch.tensor(list(lengths))[:, None]).to(device)
     sched = sampling_scheduler(cfg.sampler, cfg.steps, model.diffusion)
-    x = initial_noise(b, width, model.denoiser.feature_dim, seed).to(device) * sched.init_noise_sigma
+    if noise is not None and tuple(noise.shape) != (b, width, model.denoiser.feature_dim):
+        raise PhysmotionError(f"noise must be {(b, width, model.denoiser.feature_dim)}, got {tuple(noise.shape)}")
+    x0_noise = initial_noise(b, width, model.denoiser.feature_dim, seed) if noise is None else noise.float()
+    x = x0_noise.to(device) * sched.init_noise_sigma
     gen = torch.Generator().manual_seed(seed)
     both = _doubled(text)
     drop = torch.cat([torch.zeros(b, dtype=torch.bool), torch.ones(b, dtype=torch.bool)]).to(device)

@@ -11,6 +11,10 @@ Exact resumption without saving RNG streams: the batch order of epoch e is a per
 seeded by ``(seed, s)``. A resumed run therefore replays exactly the steps an uninterrupted run takes.
 The output folder holds the model for sampling (EMA weights, :class:`MotionDiffusion`), ``train_state.pt``
 (raw weights, optimizer, EMA, step) and ``loss.csv``; all are written atomically every few minutes.
+
+Fine-tuning (Morph, Sec. 3.3: "we follow the original training setup, only adjusting the learning rate")
+runs this same loop: ``init`` gives the starting weights and ``dataset`` the data (see
+:mod:`physmotion.morph.finetune`).
 """
 
 from __future__ import annotations
@@ -44,6 +48,7 @@ from physmotion.training import (
 
 if TYPE_CHECKING:
     from accelerate import Accelerator
+    from torch.utils.data import Dataset
 
 STATE_FILE = "train_state.pt"
 LOSS_FILE = "loss.csv"
@@ -99,11 +104,25 @@ def _accelerator(cpu: bool, bf16: bool) -> Accelerator:
     return Accelerator(cpu=cpu, mixed_precision="bf16" if bf16 else "no")
 
 
-def train_denoiser(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> TrainResult:
+def train_denoiser(
+    cfg: TrainConfig,
+    resume: bool = False,
+    progress: bool = True,
+    *,
+    init: MotionDiffusion | None = None,
+    dataset: Dataset | None = None,
+    info: dict | None = None,
+) -> TrainResult:
     """Train (or resume training) a text-to-motion denoiser on a HumanML3D-layout folder.
 
     ``cfg`` is not changed: what the run decides (the text and feature widths, bf16) goes into the copy
-    that is saved with it."""
+    that is saved with it.
+
+    init: start from this model's weights and denoiser config instead of a fresh network (the EMA starts
+    at them too); its text encoder and diffusion config must be ``cfg``'s. dataset: train on it instead of
+    ``cfg.data``'s train split: items as :class:`MotionDataset`'s, a ``normalizer`` and ``set_epoch``, and
+    optionally ``batch_indices(batch_size, seed, step) -> (epoch, indices)`` to compose its own batches.
+    info: entries added to (or replacing) the saved model's ``info``."""
     from diffusers.training_utils import EMAModel
 
     out = Path(cfg.out)
@@ -117,15 +136,26 @@ def train_denoiser(cfg: TrainConfig, resume: bool = False, progress: bool = True
 
     # The crop sets the window length only: every motion of up to 196 frames is kept and cropped. (Up to
     # step 7904 the shipped model's run passed the crop as max_frames, which dropped the longer ones.)
-    dataset = MotionDataset(cfg.data, "train", crop=cfg.crop, random_crop=cfg.random_crop, seed=cfg.seed)
+    if dataset is None:
+        dataset = MotionDataset(cfg.data, "train", crop=cfg.crop, random_crop=cfg.random_crop, seed=cfg.seed)
     encoder = load_text_encoder(cfg.text_encoder)
-    denoiser = replace(cfg.denoiser, text_dim=encoder.dim, feature_dim=dataset.normalizer.dim)
+    if init is not None:
+        if init.text_encoder != cfg.text_encoder or init.diffusion != cfg.diffusion:
+            raise PhysmotionError("the starting model's text encoder or diffusion config differs from the run's")
+        if (init.denoiser.text_dim, init.denoiser.feature_dim) != (encoder.dim, dataset.normalizer.dim):
+            raise PhysmotionError(f"the starting model takes {init.denoiser.feature_dim}-d features and "
+                                  f"{init.denoiser.text_dim}-d text, the data {dataset.normalizer.dim}-d "
+                                  f"and {encoder.dim}-d")  # fmt: skip
+    denoiser = init.denoiser if init is not None else cfg.denoiser
+    denoiser = replace(denoiser, text_dim=encoder.dim, feature_dim=dataset.normalizer.dim)
     cfg = replace(cfg, denoiser=denoiser)
     if cfg.bf16 is None:
         cfg = replace(cfg, bf16=bf16_helps(cfg.device))  # saved as decided
     accel = _accelerator(cfg.device == "cpu", cfg.bf16)
     torch.manual_seed(cfg.seed)
     net = build_denoiser(cfg.denoiser)
+    if init is not None:
+        net.load_state_dict(init.net.state_dict())
     opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     ema = EMAModel(net.parameters(), decay=cfg.ema_decay)
     step, losses = 0, []
@@ -140,14 +170,17 @@ def train_denoiser(cfg: TrainConfig, resume: bool = False, progress: bool = True
     noise_sched = training_scheduler(cfg.diffusion)
 
     def save() -> None:
-        _save(cfg, out, accel.unwrap_model(net), opt, ema, step, losses, dataset)
+        _save(cfg, out, accel.unwrap_model(net), opt, ema, step, losses, dataset, info)
 
     t0 = last_save = time.monotonic()
     window: list[float] = []
     bar = loss_bar(progress, cfg.steps, step)
     net.train()
     while step < cfg.steps:
-        epoch, idx = batch_indices(len(dataset), cfg.batch_size, cfg.seed, step)
+        if hasattr(dataset, "batch_indices"):  # a dataset that composes its batches (a fixed mix)
+            epoch, idx = dataset.batch_indices(cfg.batch_size, cfg.seed, step)
+        else:
+            epoch, idx = batch_indices(len(dataset), cfg.batch_size, cfg.seed, step)
         dataset.set_epoch(epoch)
         batch = collate([dataset[i] for i in idx])
         x0, mask = batch["motion"].to(accel.device), batch["mask"].to(accel.device)
@@ -187,7 +220,7 @@ def train_denoiser(cfg: TrainConfig, resume: bool = False, progress: bool = True
 
 
 def _save(cfg: TrainConfig, out: Path, net: torch.nn.Module, opt, ema, step: int,
-          losses: list, dataset: MotionDataset) -> None:  # fmt: skip
+          losses: list, dataset: Dataset, extra: dict | None = None) -> None:  # fmt: skip
     """Checkpoint: resumable state first, then the EMA model for sampling, then the loss log."""
     state = {"net": net.state_dict(), "opt": opt.state_dict(), "ema": ema.state_dict(), "step": step,
              "losses": losses, "config": asdict(cfg)}  # fmt: skip
@@ -197,7 +230,7 @@ def _save(cfg: TrainConfig, out: Path, net: torch.nn.Module, opt, ema, step: int
     info_path = Path(cfg.data) / "build_info.json"
     build_info = json.loads(info_path.read_text()) if info_path.is_file() else {}
     info = {"data": str(cfg.data), "licence_tags": build_info.get("licence_tags", ["unknown"]),
-            "train_items": len(dataset), "steps": step, "train": _summary(cfg)}  # fmt: skip
+            "train_items": len(dataset), "steps": step, "train": _summary(cfg)} | (extra or {})  # fmt: skip
     MotionDiffusion(ema_net.eval(), cfg.denoiser, cfg.diffusion, dataset.normalizer, cfg.text_encoder, info).save(out)
     lines = "step,loss\n" + "".join(f"{s},{v:.6f}\n" for s, v in losses)
     write_atomic(out / LOSS_FILE, lambda f: f.write(lines), "w")

@@ -1,4 +1,4 @@
-"""Generation modes side by side (``none``, ``none+floor``, ``post:K``, ``physdiff:<schedule>``: see
+"""Generation modes side by side (``none``, ``none+floor``, ``post:K``, ``physdiff:<schedule>``, ``morph``: see
 :mod:`physmotion.physics_mode`), with physical metrics."""
 
 from __future__ import annotations
@@ -27,6 +27,13 @@ def reset_columns(results: Sequence[GenerateResult]) -> dict[str, float]:
     return {"reset_rate": float(np.mean([c > 0 for c in counts])), "resets": float(np.mean(counts))}
 
 
+def imitation_columns(results: Sequence[GenerateResult]) -> dict[str, float]:
+    """Morph's ``imitation_failure_rate`` (Sec. 4, IFR): the share of output motions of the ``morph`` mode
+    whose imitation failed, so that the sampled motion was kept. Empty for the other modes."""
+    failed = [f for r in results for f in r.imitation_failed]
+    return {"imitation_failure_rate": float(np.mean(failed))} if failed else {}
+
+
 def metric_surface(name: str, bodies: Sequence[np.ndarray | None] | None = None):
     """The body surface of the physical metrics by name: "humanoid" (its geometry, posed with P's body
     where ``bodies`` gives one, e.g. ``GenerateResult.bodies``, else with one estimated from the joints)
@@ -49,7 +56,8 @@ def compare_modes(
 ) -> dict[str, dict[str, float]]:
     """Generate one motion per prompt in each mode; mode spelling -> physical metrics (mean over
     motions) plus ``seconds_per_motion``, ``tracked`` (fraction of all projections, PhysDiff's four per
-    motion included, in which the humanoid never fell) and :func:`reset_columns`.
+    motion included, in which the humanoid never fell), :func:`reset_columns` and
+    :func:`imitation_columns`.
 
     surface "humanoid": the humanoid's geometry, with the body P simulated for projected outputs and one
     estimated from the joints otherwise; "joints": the joint-only surface model."""
@@ -67,5 +75,6 @@ def compare_modes(
         log = out.projections
         row["tracked"] = float(np.mean(log.tracked)) if log.tracked else float("nan")
         row.update(reset_columns([out]))
+        row.update(imitation_columns([out]))
         results[str(mode)] = row
     return results

@@ -38,3 +38,27 @@ PHYSICS_PROMPTS: tuple[str, ...] = (
     "a person throws punches",
     "a person starts walking, then stops",
 )
+
+# Prompts written from scratch for the unseen-prompt benchmark (Morph and the dynamic-motion projection):
+# none is a train caption (tests/eval/test_prompts.py checks), each category has at least 4, and runs and
+# jumps are categories of their own so that their rows can be read alone.
+NEW_PROMPTS: dict[str, tuple[str, ...]] = {
+    "run": ("someone sprints straight ahead", "a man runs quickly across the room",
+            "a runner speeds up and then slows down", "a woman runs in a wide circle"),
+    "jog": ("a person jogs slowly in place", "someone jogs forward at an easy pace",
+            "a jogger moves forward and glances around", "a person jogs a few steps and stops"),
+    "jump": ("a person jumps forward with both feet", "someone leaps high into the air",
+             "a person does three small jumps in a row", "a man jumps over a puddle"),
+    "hop": ("a person hops on the left foot", "someone hops forward on one leg",
+            "a child hops around happily", "a person hops from side to side"),
+    "kick": ("a person kicks high with the right leg", "someone kicks a ball forward",
+             "a fighter does a front kick", "a person kicks twice with the left foot"),
+    "turn": ("a person spins around once", "someone turns around on the spot",
+             "a person pivots to face the other way", "a dancer twirls in place"),
+    "dance": ("a person dances energetically", "someone does a little dance with the arms up",
+              "a person sways to music", "a person dances and claps"),
+    "gesture": ("a person claps the hands", "someone points to the left", "a person shrugs the shoulders",
+                "a person stretches both arms above the head"),
+    "stand": ("a person stands still", "someone stands and looks around",
+              "a person waits in place shifting weight", "a person stands and scratches the head"),
+}

@@ -21,7 +21,8 @@ surface (:func:`ground_on_surface`, the constant shift with the least Phys-Err) 
 row is; ``none`` is measured as sampled.
 ``reset_rate`` is the share of output motions whose projection put the fallen humanoid back on the motion
 at least once (MPJPE past tau, 0.15 m in generation) and ``resets`` the mean number of those jumps per
-motion. Neither is Morph's imitation failure rate (0.5 m, the input kept: ``metrics.imitation_failure_rate``).
+motion. Neither is Morph's imitation failure rate: ``imitation_failure_rate``, given for the ``morph`` mode, is
+the share of its motions whose imitation failed (MPJPE past 0.5 m), so that the sampled motion was kept.
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.physdiff import joints_to_features, on_data_floor, reset_settings
 from physmotion.errors import PhysmotionError
 from physmotion.eval.evaluator import Evaluator
-from physmotion.eval.physics_modes import metric_surface, reset_columns
+from physmotion.eval.physics_modes import imitation_columns, metric_surface, reset_columns
 from physmotion.features.humanml3d import recover_from_ric
 from physmotion.generate import GenerateConfig, generate
 from physmotion.metrics import physical_metrics
@@ -59,7 +60,8 @@ REAL = "real"
 GENERATION_COLUMNS = ("R@1", "R@2", "R@3", "FID", "MM-Dist", "Diversity", "MModality", "sec/motion")
 BETTER = {"R@1": "↑", "R@2": "↑", "R@3": "↑", "FID": "↓", "MM-Dist": "↓", "Diversity": "→", "MModality": "↑",
           "sec/motion": "↓"}  # fmt: skip
-RESET_COLUMNS = {"reset_rate": "reset_rate (share)", "resets": "resets (per motion)"}
+RESET_COLUMNS = {"reset_rate": "reset_rate (share)", "resets": "resets (per motion)",
+                 "imitation_failure_rate": "imitation_failure_rate (share)"}
 
 
 @dataclass
@@ -181,6 +183,7 @@ def evaluate(
             "model_licence": model.licence_tag, "evaluator_licence": evaluator.licence_tag,
             "sampler": asdict(cfg.base.sampler),
             "projection": reset_settings(cfg.base.projection),
+            "morph_projection": reset_settings(cfg.base.morph_projection),
             "surface": cfg.surface, "seed": cfg.seed,
             "data": str(data)}  # fmt: skip
     return EvalTable(rows=rows, meta=meta)
@@ -242,7 +245,7 @@ def _generate(model, captions, items, gen_cfg, batch, tick) -> tuple[list, list,
         bodies += out.bodies
         results.append(out)
         tick(len(joints))
-    return joints, bodies, time.perf_counter() - start, reset_columns(results)
+    return joints, bodies, time.perf_counter() - start, reset_columns(results) | imitation_columns(results)
 
 
 def _scores(emb, text_emb, real_emb, r, cfg) -> dict[str, float]:

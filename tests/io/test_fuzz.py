@@ -30,7 +30,8 @@ from physmotion.io import import_clip, save_motion
 from physmotion.motion import Motion
 
 SEED = 24
-LIMIT_S = 5.0
+LIMIT_S = 5.0  # CPU seconds a case may take
+WALL_STOP = 4  # x LIMIT_S of wall time ends a case as a hang
 REPO = Path(__file__).resolve().parents[2]
 MAPPING = REPO / "docs" / "examples" / "mapping_bandai.json"
 BANDAI = "bandai/Bandai-Namco-Research-Motiondataset-1/data/dataset-1_dash_normal_001.bvh"
@@ -424,8 +425,10 @@ def run_case(case: Case, folder: Path, mocap_dir: Path, to_file: bool) -> tuple[
             f.unlink()
     out_dir = folder / "out"
     previous = signal.signal(signal.SIGALRM, _alarm)
-    signal.setitimer(signal.ITIMER_REAL, LIMIT_S)  # a Python-level hang ends here; time is checked too
-    start = time.perf_counter()
+    # A case is judged by the CPU time it takes (what it costs alone: CI shares its 2 cores with nothing,
+    # a developer's machine may not); a hang is stopped by the wall clock at WALL_STOP.
+    signal.setitimer(signal.ITIMER_REAL, WALL_STOP * LIMIT_S)
+    start = time.process_time()
     try:
         motion = _read(case, folder, mocap_dir)
         problem = _valid(motion)
@@ -433,7 +436,7 @@ def run_case(case: Case, folder: Path, mocap_dir: Path, to_file: bool) -> tuple[
             save_motion(motion, out_dir / "motion.npz")
         outcome, detail = ("invalid", problem) if problem else ("ok", "")
     except _Timeout:
-        outcome, detail = "slow", f"over {LIMIT_S} s"
+        outcome, detail = "slow", f"over {WALL_STOP * LIMIT_S} s of wall time"
     except PhysmotionError as exc:
         message = str(exc)
         outcome, detail = (
@@ -444,9 +447,9 @@ def run_case(case: Case, folder: Path, mocap_dir: Path, to_file: bool) -> tuple[
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
         signal.signal(signal.SIGALRM, previous)
-    seconds = time.perf_counter() - start
+    seconds = time.process_time() - start
     if seconds > LIMIT_S:
-        outcome, detail = "slow", f"{seconds:.1f} s"
+        outcome, detail = "slow", f"{seconds:.1f} s of CPU time"
     if to_file and out_dir.exists():  # nothing, or whole files only
         left = sorted(p.name for p in out_dir.iterdir())
         whole = (

@@ -1,0 +1,77 @@
+"""Morph's synthetic data throughput: synthetic motions refined per second, and where the time goes.
+
+Usage: python bench/morph.py [--model DIR] [--data data_build/mocap] [--captions 16] [--per-caption 1]
+    [--workers 0] [--steps 50]
+Runs :func:`physmotion.morph.synth.synthesize` on the first ``--captions`` distinct train captions
+(lengths drawn from the train split, 50 DDIM steps, P with Morph's selection settings) into a temporary
+folder, and prints one table from its :class:`SynthReport`: items per second, the share of wall time in
+sampling (the denoiser) and in P (pre-processing, projection, features and writing, waited for).
+The model is loaded before timing; the first batch pays the text encoder's and the worker pool's start.
+With ``--run RUN`` (a finished `physmotion morph run` folder) it adds each round's split of wall time
+between synthesis and fine-tuning, from ``RUN/rounds.json``.
+
+On one GPU the denoiser's share (sampling and fine-tuning) would shrink by one to two orders of magnitude
+while P, MuJoCo on the CPU, would not: P would become the bottleneck of synthesis.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+from pathlib import Path
+
+from rich.console import Console
+from rich.table import Table
+
+from physmotion.diffusion.model import MotionDiffusion
+from physmotion.diffusion.samplers import SamplerConfig
+from physmotion.morph.synth import SynthConfig, synthesize, train_captions
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--model", type=Path, default=None)
+    parser.add_argument("--data", type=Path, default=Path("data_build/mocap"))
+    parser.add_argument("--captions", type=int, default=16)
+    parser.add_argument("--per-caption", type=int, default=1)
+    parser.add_argument("--workers", type=int, default=0)
+    parser.add_argument("--steps", type=int, default=50)
+    parser.add_argument("--batch-size", type=int, default=16)
+    parser.add_argument("--run", type=Path, default=None, help="a finished `morph run` folder")
+    args = parser.parse_args()
+
+    model = MotionDiffusion.load(args.model)
+    captions = train_captions(args.data)[: args.captions]
+    cfg = SynthConfig(per_caption=args.per_caption, workers=args.workers, batch_size=args.batch_size,
+                      sampler=SamplerConfig(steps=args.steps))  # fmt: skip
+    with tempfile.TemporaryDirectory() as tmp:
+        report = synthesize(args.model, args.data, Path(tmp) / "synth", cfg, captions=captions, model=model)
+
+    table = Table(title=f"Morph synthetic data: {report.done} motions ({len(captions)} captions x "
+                  f"{args.per_caption}), {args.steps} DDIM steps, batch {args.batch_size}")  # fmt: skip
+    for col in ("stage", "seconds", "share of wall", "motions / s"):
+        table.add_column(col, justify="right" if col != "stage" else "left")
+    wall = report.seconds or float("nan")
+    table.add_row("sampling (denoiser)", f"{report.sampling_seconds:.1f}",
+                  f"{report.sampling_seconds / wall:.0%}", f"{report.done / report.sampling_seconds:.2f}")
+    table.add_row("P (pre-process, project, features, write)", f"{report.physics_seconds:.1f}",
+                  f"{report.physics_seconds / wall:.0%}", f"{report.done / report.physics_seconds:.2f}")
+    table.add_row("synthetic data, total", f"{report.seconds:.1f}", "100%", f"{report.items_per_second:.2f}")
+    for row in _rounds(args.run) if args.run else []:  # a whole round: synthesis, then fine-tuning
+        total = row["synth_seconds"] + row["finetune_seconds"]
+        for stage, key in (("synthesis", "synth_seconds"), ("fine-tuning", "finetune_seconds")):
+            table.add_row(f"round {row['round']}: {stage} ({row['synthetic_items']} motions, "
+                          f"{row['finetune_steps']} steps)", f"{row[key]:.0f}", f"{row[key] / total:.0%} of round",
+                          f"{row['synthetic_items'] / row[key]:.2f}")  # fmt: skip
+    Console(width=160).print(table)
+
+
+def _rounds(run: Path) -> list[dict]:
+    """The rows of ``run/rounds.json`` (written by physmotion.morph.loop)."""
+    import json
+
+    return json.loads((run / "rounds.json").read_text())["rounds"]
+
+
+if __name__ == "__main__":
+    main()

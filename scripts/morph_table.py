@@ -1,0 +1,100 @@
+"""Morph's Tables 1/2 on our data: the base model and each fine-tuned round, each in several physics modes.
+
+    python scripts/morph_table.py --data data_build/mocap --run runs/morph -o results/morph
+
+runs `physmotion evaluate` on the base model and on every ``<run>/round_<k>/model`` that `physmotion morph
+run` wrote, on the same split, captions, lengths and seeds, and writes one table (<out>.md, <out>.json):
+rows "<model> <mode>" (e.g. "base physdiff:end:4,space:1", "round 1 morph"), plus the real motions, with
+each round's synthetic-data figures (items, refined kept, IFR) from ``<run>/rounds.json`` in the JSON's meta.
+Each (model, mode) table is kept in ``<out>.parts/`` and reused by a re-run with the same settings.
+It is a script rather than a command because it is a study over several models.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from physmotion.diffusion.model import MotionDiffusion
+from physmotion.errors import PhysmotionError
+from physmotion.eval.evaluator import Evaluator
+from physmotion.eval.table import REAL, EvalTable, EvaluateConfig, evaluate
+from physmotion.physics_mode import parse_modes
+
+BASE_MODES = "none,none+floor,morph,physdiff:end:4,space:1"
+ROUND_MODES = "none,none+floor,morph"
+
+
+def _rounds(run: Path) -> list[tuple[str, Path]]:
+    """("round k", model folder) of every finished round of a `morph run` folder, in order."""
+    found = sorted((int(p.parent.name.split("_")[1]), p) for p in run.glob("round_*/model")
+                   if (p / "config.json").is_file())  # fmt: skip
+    if not found:
+        raise PhysmotionError(f"{run}: no finished round (round_<k>/model with config.json)")
+    return [(f"round {k}", p) for k, p in found]
+
+
+def morph_table(data: str, run: Path, base: str | None, cfg: EvaluateConfig, evaluator: Evaluator,
+                parts: Path) -> EvalTable:  # fmt: skip
+    """One EvalTable over the base model (BASE_MODES) and every round of ``run`` (ROUND_MODES).
+
+    Each (model, mode) table is kept in ``parts/<model>__<mode>.json`` and reused by a re-run with the same
+    settings: an interrupted study loses at most one evaluation, and a changed mode is re-run alone
+    (evaluate draws captions and noise per repeat, not per mode, so the parts are the rows of one run)."""
+    from dataclasses import replace
+
+    rows: dict = {}
+    meta: dict = {"models": {}, "rounds": {}}
+    for name, folder, modes in [("base", base, BASE_MODES)] + [(n, f, ROUND_MODES) for n, f in _rounds(run)]:
+        net = None
+        for mode in (str(m) for m in parse_modes(modes)):
+            run_cfg = replace(cfg, modes=(mode,))
+            part = parts / f"{name.replace(' ', '_')}__{mode.replace(':', '_').replace(',', '_')}.json"
+            table = EvalTable.from_json(part) if part.is_file() else None
+            wanted = {"modes": [mode], "repeats": run_cfg.repeats, "split": run_cfg.split, "seed": run_cfg.seed,
+                      "model_folder": str(folder or "default")}  # fmt: skip
+            if table is None or {k: table.meta.get(k) for k in wanted} != wanted:
+                net = net or MotionDiffusion.load(folder)
+                table = evaluate(net, evaluator, data, run_cfg)
+                table.meta["model_folder"] = wanted["model_folder"]
+                table.write(part.with_suffix(""))
+            rows.setdefault(REAL, table.rows[REAL])
+            rows[f"{name} {mode}"] = table.rows[mode]
+            meta["models"].setdefault(name, {"folder": str(folder or "default"), **table.meta, "modes": []})
+            meta["models"][name]["modes"].append(mode)
+    first = next(iter(meta["models"].values()))  # every model ran on the same split, sampler and surface
+    meta.update({k: first[k] for k in ("split", "motions", "repeats", "sampler", "surface", "seed", "data")})
+    summary = run / "rounds.json"
+    if summary.is_file():
+        meta["rounds"] = json.loads(summary.read_text())
+    return EvalTable(rows=rows, meta=meta)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", required=True, help="HumanML3D-layout folder")
+    parser.add_argument("--run", required=True, type=Path, help="a `physmotion morph run` folder")
+    parser.add_argument("-o", "--out", default="results/morph", help="output stem")
+    parser.add_argument("--base", default=None, help="base model folder (default: the shipped model)")
+    parser.add_argument("--evaluator", default=None, help="evaluator folder (default: the shipped one)")
+    parser.add_argument("--split", default="test")
+    parser.add_argument("--repeats", type=int, default=EvaluateConfig.repeats)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args(argv)
+    try:
+        cfg = EvaluateConfig(split=args.split, repeats=args.repeats, seed=args.seed)
+        parts = Path(f"{args.out}.parts")
+        table = morph_table(args.data, args.run, args.base, cfg, Evaluator.load(args.evaluator), parts)
+        paths = table.write(args.out)
+    except PhysmotionError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    print(table.to_markdown())
+    print("wrote " + ", ".join(map(str, paths)))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

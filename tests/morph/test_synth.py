@@ -1,0 +1,144 @@
+"""Morph's synthetic data run on the shipped model and the real built dataset: layout, features,
+determinism, resume, and a folder from another model refused."""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from physmotion.diffusion.samplers import SamplerConfig
+from physmotion.errors import PhysmotionError
+from physmotion.features.humanml3d import extract_features
+from physmotion.morph.preprocess import correct_tilt, tilt_angle
+from physmotion.morph.selection import INDEX_FIELDS, select
+from physmotion.morph.synth import SUBDIRS, SynthConfig, synthesize
+
+CAPTIONS = ["a person walks forward", "a person jumps", "a person sits on a chair", "a person waves"]
+
+
+@pytest.fixture(scope="module")
+def model():
+    from physmotion.diffusion.model import MotionDiffusion
+
+    return MotionDiffusion.load(None)
+
+
+def config() -> SynthConfig:
+    return SynthConfig(sampler=SamplerConfig(steps=5), batch_size=2, max_frames=40, workers=2)
+
+
+def run(model, built_dir: Path, out: Path, **kw):
+    return synthesize(None, built_dir, out, config(), captions=kw.pop("captions", CAPTIONS), model=model, **kw)
+
+
+@pytest.fixture(scope="module")
+def full(model, built_dir: Path, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("synth") / "full"
+    report = run(model, built_dir, out)
+    assert (report.planned, report.done, report.total_done) == (4, 4, 4)
+    assert report.sampling_seconds > 0 and report.physics_seconds > 0
+    return out
+
+
+def index_rows(folder: Path) -> list[dict]:
+    with open(folder / "index.csv", newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def test_layout(full: Path) -> None:
+    info = json.loads((full / "synth.json").read_text())
+    for key in ("model", "model_sha256", "feature_dim", "skeleton", "fps", "data", "split", "per_caption",
+                "seed", "tau", "licence_tags", "preprocess", "projection", "items_planned"):  # fmt: skip
+        assert key in info
+    assert (info["feature_dim"], info["skeleton"], info["fps"], info["tau"]) == (263, "smpl22", 20, 0.5)
+    assert info["projection"]["reset_on_fail"] is False and info["items_planned"] == 4
+    rows = index_rows(full)
+    assert list(rows[0]) == list(INDEX_FIELDS)
+    assert [r["id"] for r in rows] == ["s000000", "s000001", "s000002", "s000003"]
+    assert [r["caption"] for r in rows] == CAPTIONS
+    assert [r["grounded"] for r in rows] == ["1", "1", "0", "1"]
+    for r in rows:
+        sid, frames = r["id"], int(r["frames"])
+        sim, inp = (np.load(full / d / f"{sid}.npy") for d in ("new_joints", "input_joints"))
+        assert sim.shape == inp.shape == (frames, 22, 3) and sim.dtype == inp.dtype == np.float32
+        for joints, vecs in ((sim, "new_joint_vecs"), (inp, "input_joint_vecs")):
+            feats = np.load(full / vecs / f"{sid}.npy")
+            assert feats.dtype == np.float32
+            np.testing.assert_allclose(feats, extract_features(joints)[0], atol=1e-5)
+        assert (full / "texts" / f"{sid}.txt").read_text() == f"{r['caption']}##0.0#0.0\n"
+        assert 0 <= float(r["mpjpe_mean"]) <= float(r["mpjpe_max"])
+    sel = select(full)
+    assert sel.counts["items"] == 4 and sel.counts["non_grounded"] == 1
+
+
+def test_same_seed_same_files(model, built_dir: Path, full: Path, tmp_path: Path) -> None:
+    # batch size 4 and one worker against the fixture's 2 and 2: an item's noise does not depend on its batch
+    out = tmp_path / "again"
+    synthesize(None, built_dir, out, SynthConfig(sampler=SamplerConfig(steps=5), batch_size=4, max_frames=40,
+                                                 workers=1), captions=CAPTIONS, model=model)  # fmt: skip
+    assert_same(full, out, atol=1e-4)
+
+
+def assert_same(a: Path, b: Path, atol: float = 0.0) -> None:
+    ra, rb = index_rows(a), index_rows(b)
+    assert [r["id"] for r in ra] == [r["id"] for r in rb]
+    for r in ra:
+        for sub in SUBDIRS[:4]:
+            np.testing.assert_allclose(np.load(a / sub / f"{r['id']}.npy"), np.load(b / sub / f"{r['id']}.npy"),
+                                       atol=atol)  # fmt: skip
+
+
+def test_interrupted_run_resumes_without_duplicates(model, built_dir: Path, full: Path, tmp_path: Path) -> None:
+    out = tmp_path / "resumed"
+    first = run(model, built_dir, out, limit=2)
+    assert (first.done, first.total_done) == (2, 2)
+    second = run(model, built_dir, out)
+    assert (second.done, second.skipped, second.total_done) == (2, 2, 4)
+    ids = [r["id"] for r in index_rows(out)]
+    assert ids == sorted(set(ids)) and len(ids) == 4
+    assert_same(full, out)
+    again = run(model, built_dir, out)  # finished: nothing to do
+    assert again.done == 0 and len(index_rows(out)) == 4
+
+
+def test_folder_of_another_model_is_refused(model, built_dir: Path, full: Path, tmp_path: Path) -> None:
+    out = tmp_path / "other"
+    shutil.copytree(full, out)
+    info = json.loads((out / "synth.json").read_text())
+    info["model_sha256"] = "0" * 64
+    (out / "synth.json").write_text(json.dumps(info))
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    with pytest.raises(PhysmotionError, match="made by another model") as err:
+        run(model, built_dir, out)
+    assert "\n" not in str(err.value)
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+
+
+def test_other_settings_are_refused(model, built_dir: Path, full: Path, tmp_path: Path) -> None:
+    out = tmp_path / "settings"
+    shutil.copytree(full, out)
+    with pytest.raises(PhysmotionError, match="other settings"):
+        synthesize(None, built_dir, out, SynthConfig(sampler=SamplerConfig(steps=5), batch_size=2, max_frames=40,
+                                                     seed=1), captions=CAPTIONS, model=model)  # fmt: skip
+
+
+def test_tilt_correction() -> None:
+    from physmotion.skeleton import rest_joints
+
+    stand = np.repeat(rest_joints()[None], 5, axis=0)
+    stand[:, :, 0] += np.linspace(0, 1, 5)[:, None]  # a path along x
+    assert tilt_angle(stand) < 10
+    theta = np.radians(20)
+    rot = np.array([[1, 0, 0], [0, np.cos(theta), -np.sin(theta)], [0, np.sin(theta), np.cos(theta)]])
+    leaning = stand @ rot.T
+    assert tilt_angle(leaning) == pytest.approx(tilt_angle(stand) + 20, abs=3)
+    fixed, angle = correct_tilt(leaning)
+    assert angle > 10 and tilt_angle(fixed) < 1e-6
+    np.testing.assert_allclose(fixed[:, 0], leaning[:, 0])  # the root's path is kept
+    same, _ = correct_tilt(stand)
+    np.testing.assert_array_equal(same, stand)  # under 10 degrees: untouched
