@@ -535,12 +535,12 @@ def morph_synth_cmd(
 @morph_app.command("select")
 def morph_select_cmd(
     synth: Path = typer.Argument(..., help="A synthetic data folder made by 'physmotion morph synth'."),
-    tau: float = typer.Option(0.5, help="MPJPE threshold in metres (Morph: 0.5)."),
+    tau: float | None = typer.Option(None, help="MPJPE threshold in metres (default: Morph's 0.5)."),
 ) -> None:
     """Morph's imitation selection: refined motion where P imitated it, else the generated input."""
-    from physmotion.morph.selection import select
+    from physmotion.morph.selection import TAU, select
 
-    sel = select(synth, tau=tau)
+    sel = select(synth, tau=TAU if tau is None else tau)
     c = sel.counts
     console.print(f"{c['items']} item(s): {c['refined']} refined, {c['input']} input; IFR {sel.ifr:.3f} "
                   f"({c['failed']} of {c['grounded']} grounded refinements rejected, {c['episode_failed']} "
@@ -604,6 +604,7 @@ def morph_run_cmd(
     last = rows[-1]
     console.print(f"{len(rows)} round(s) done; last: IFR {last.ifr:.3f}, loss {last.final_loss:.4f}, model in "
                   f"{last.model}; table in {out / 'rounds.md'}", highlight=False)  # fmt: skip
+
 
 def main() -> None:
     """Entry point of the console script: user errors become one line, never a traceback."""

@@ -21,6 +21,7 @@ DOCS = {
     "README": ROOT / "README.md",
     "results": RESULTS / "README.md",
     "model card": ROOT / "physmotion" / "models" / "default" / "README.md",
+    "morph card": ROOT / "physmotion" / "models" / "morph" / "README.md",
 }
 
 
@@ -77,6 +78,21 @@ def schedule_quotes() -> list[str]:
     ]
 
 
+def morph_quotes() -> list[str]:
+    """Morph's table (results/morph.json, scripts/morph_table.py) as the README and the Morph card quote it."""
+    rows = _load("morph.json")["rows"]
+    err = {r: rows[r]["phys_err"]["mean"] for r in rows if r != "real"}
+    fid = {r: rows[r]["FID"]["mean"] for r in rows if r != "real"}
+    return [
+        f"none {err['base none']:.1f} -> {err['round 1 none']:.1f} -> {err['round 2 none']:.1f} mm",
+        f"none+floor {err['base none+floor']:.1f} -> {err['round 1 none+floor']:.1f} -> "
+        f"{err['round 2 none+floor']:.1f} mm",
+        f"morph {err['base morph']:.1f} -> {err['round 1 morph']:.1f} -> {err['round 2 morph']:.1f} mm",
+        f"FID {fid['base none']:.3f} -> {fid['round 1 none']:.3f} -> {fid['round 2 none']:.3f}",
+        f"PhysDiff {err['base ' + PHYSDIFF]:.1f} mm",
+    ]
+
+
 QUOTES = {  # which doc quotes which result file
     ("README", "evaluate"): evaluate_quotes,
     ("README", "bench"): bench_quotes,
@@ -84,12 +100,15 @@ QUOTES = {  # which doc quotes which result file
     ("results", "schedule"): schedule_quotes,
     ("model card", "evaluate"): evaluate_quotes,
     ("model card", "bench"): bench_quotes,
+    ("README", "morph"): morph_quotes,
+    ("morph card", "morph"): morph_quotes,
 }
 
 
 def _section(text: str, source: str) -> str:
     """The paragraph(s) of a doc that quote ``source``: those naming its file or command."""
-    files = {"evaluate": "evaluate_default", "bench": "physdiff_quality", "schedule": "schedule_study"}
+    files = {"evaluate": "evaluate_default", "bench": "physdiff_quality", "schedule": "schedule_study",
+             "morph": "results/morph.md"}
     marker = files[source]
     return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
 

@@ -27,7 +27,7 @@ from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.train import TrainConfig, TrainResult, masked_mse, train_denoiser
 from physmotion.errors import PhysmotionError
 from physmotion.features.normalize import Normalizer
-from physmotion.morph.selection import Selection, read_synth_info, select
+from physmotion.morph.selection import TAU, Selection, read_synth_info, select
 from physmotion.training import seeded_generator
 
 SKELETON = "smpl22"
@@ -53,7 +53,7 @@ class FinetuneConfig:
     lr: float = 1e-5  # Morph Sec. 4 "Training Setup": 1e-5 (the original runs used 2e-4 here)
     steps: int = 2000
     batch_size: int | None = None
-    tau: float = 0.5  # m: Morph's imitation selection threshold (Sec. 4)
+    tau: float = TAU  # m: Morph's imitation selection threshold (Sec. 4)
     seed: int = 0
     checkpoint_minutes: float = 5.0
     warmup: int | None = None

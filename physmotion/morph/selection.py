@@ -22,6 +22,10 @@ from pathlib import Path
 from typing import Literal
 
 from physmotion.errors import PhysmotionError
+from physmotion.physics.projection import ProjectionConfig
+
+# Morph's imitation selection threshold (Sec. 4: 0.5 m): P's own, one source of truth.
+TAU: float = ProjectionConfig.tau
 
 SYNTH_INFO = "synth.json"
 INDEX = "index.csv"
@@ -64,7 +68,7 @@ class Selection:
     ifr: float = 0.0
     counts: dict[str, int] = field(default_factory=dict)
     licence_tags: list[str] = field(default_factory=list)
-    tau: float = 0.5
+    tau: float = TAU
 
     def training_items(self) -> list[tuple[str, Path, str]]:
         """(id, features path, caption) of every selected item, for fine-tuning.
@@ -114,7 +118,7 @@ def _flag(value: object) -> bool:
     return str(value).strip().lower() in ("1", "true", "yes")
 
 
-def select_rows(rows: Iterable[Mapping[str, object]], synth_dir: str | Path = ".", tau: float = 0.5,
+def select_rows(rows: Iterable[Mapping[str, object]], synth_dir: str | Path = ".", tau: float = TAU,
                 extra_tags: Iterable[str] = ()) -> Selection:  # fmt: skip
     """Morph's selection over index rows (dicts with the ``index.csv`` columns; values as strings or
     numbers). Feature paths are made under ``synth_dir``. See the module docstring for the rule."""
@@ -153,7 +157,7 @@ def select_rows(rows: Iterable[Mapping[str, object]], synth_dir: str | Path = ".
     return Selection(items=items, ifr=ifr, counts=counts, licence_tags=sorted(tags), tau=tau)
 
 
-def select(synth_dir: str | Path, tau: float = 0.5) -> Selection:
+def select(synth_dir: str | Path, tau: float = TAU) -> Selection:
     """Morph's imitation selection over the finished items of ``synth_dir`` (index order).
 
     Raises SelectionError where the folder is not a synthetic data folder or has no finished item."""

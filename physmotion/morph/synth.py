@@ -40,7 +40,7 @@ from physmotion.errors import PhysmotionError
 from physmotion.features.humanml3d import FEATURE_DIM, extract_features, recover_from_ric
 from physmotion.morph.captions import is_grounded
 from physmotion.morph.preprocess import PreprocessConfig, preprocess
-from physmotion.morph.selection import INDEX, INDEX_FIELDS, SYNTH_INFO, read_index
+from physmotion.morph.selection import INDEX, INDEX_FIELDS, SYNTH_INFO, TAU, read_index
 from physmotion.motion import write_atomic
 from physmotion.physics.projection import ProjectionConfig, project
 from physmotion.physics.workers import map_in_workers
@@ -62,7 +62,7 @@ class SynthConfig:
     batch_size: int = 16  # samples per denoiser batch
     workers: int = 0  # physics worker processes, 0: one per core
     sampler: SamplerConfig = field(default_factory=SamplerConfig)  # generate()'s defaults (DDIM, 50 steps)
-    tau: float = 0.5  # Morph's selection threshold (App. B), also P's failure threshold
+    tau: float = TAU  # Morph's selection threshold (App. B), also P's failure threshold
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
     split: str = "train"
     max_frames: int | None = None  # clip the drawn lengths further (quick runs); None: the model's
