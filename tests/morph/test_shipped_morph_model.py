@@ -1,0 +1,25 @@
+"""The shipped Morph-tuned model (physmotion/models/morph): loads, says what it saw, and generates."""
+
+from pathlib import Path
+
+import numpy as np
+
+from physmotion.diffusion.model import DEFAULT_MODEL_DIR, MotionDiffusion
+from physmotion.generate import GenerateConfig, generate
+from physmotion.text.vocabulary import load_vocabulary
+
+MORPH_DIR = Path(DEFAULT_MODEL_DIR).parent / "morph"
+
+
+def test_morph_model_card_facts_and_generation() -> None:
+    model = MotionDiffusion.load(MORPH_DIR)
+    info = model.info["morph"]
+    assert info["rounds"] == 2 and info["selected"] == {"refined": 275, "input": 142}
+    assert model.licence_tag == "NC" and "NC" in model.info["licence_tags"]  # the base's NC data carries through
+    vocabulary = load_vocabulary(MORPH_DIR)
+    assert vocabulary is not None and load_vocabulary(DEFAULT_MODEL_DIR) <= vocabulary
+    cfg = GenerateConfig(seconds=2.0, physics="none", seed=0)
+    cfg.sampler.steps = 5
+    out = generate(["a person walks forward"], cfg, model)
+    joints = out.motions[0].joints
+    assert joints.shape == (40, 22, 3) and np.isfinite(joints).all() and out.motions[0].licence_tag == "NC"
