@@ -11,6 +11,11 @@ are in docs/decisions.md:
 - :func:`swing_clearance` lifts a moving swing foot 3 cm further from the floor while the other foot is
   on it: mocap toes clear the floor by only about 1.5 cm in mid-swing, and a body a few degrees off its
   reference scuffs the floor with them (docs/decisions.md: "swing-foot clearance of a fixed 3 cm").
+- :func:`flatten_toe_off` dorsiflexes the ankle where a push-off into a flight phase (a run's stride,
+  a jump) digs the rigid toe box into the floor: a human's toes bend there, ours cannot, and raising the
+  whole frame instead (``to_floor``) bent the reference's centre of mass into a path that needs the floor
+  to pull, which the tracker followed with a launch (docs/decisions.md: "toe-off flattened before
+  flight").
 - Support by speed (``stance_by_speed``): a generated swing foot that dips under the floor makes
   grounding raise the frame, and the slow stance foot then hangs centimetres up; such a swing foot is
   lifted above the stance foot and the frame lowered onto it (docs/decisions.md: "support found by
@@ -27,6 +32,7 @@ import numpy as np
 
 from physmotion.physics.humanoid import layout
 from physmotion.physics.surface import body_lowest, lowest_of, pose_frames
+from physmotion.physics.tracking import STANDARD_GRAVITY
 from physmotion.skeleton import JOINT_INDEX
 
 _IK_STEPS = 4  # most Gauss-Newton steps of swing_clearance's leg IK
@@ -44,13 +50,19 @@ class ShapingConfig:
     # A fast foot on the floor under a slow foot in the air is a swing foot that dipped into the floor
     # (grounding then lifted the frame by it): lift it above the slow foot and lower the frame onto that.
     stance_by_speed: bool = True
+    # flatten_toe_off: dorsiflex the ankle where the toe box dips under the floor and under its heel, in
+    # the ``toe_off_lead`` seconds before a flight phase: a frame where the reference's centre of mass
+    # falls faster than (1 - ``flight_load``) g, i.e. the feet would carry less than that share of W.
+    flatten_toe_off: bool = True
+    toe_off_lead: float = 0.2
+    flight_load: float = 0.3
 
 
 def shape_reference(model, qpos: np.ndarray, dt: float, config: ShapingConfig | None = None) -> np.ndarray:
     """The reference qpos (N, 70) at step ``dt`` corrected as ``config`` says (a new array)."""
     cfg = config or ShapingConfig()
-    geo = _Geometry(model, qpos)  # one kinematics pass serves both corrections
-    out = qpos.copy()
+    out = flatten_toe_off(model, qpos, dt, cfg) if cfg.flatten_toe_off else qpos.copy()
+    geo = _Geometry(model, out)  # one kinematics pass serves both corrections
     shift = _floor_shift(geo.lowest, dt, cfg.float_window) if cfg.ground else np.zeros(len(qpos))
     out[:, 2] += shift
     geo.lowest += shift  # a vertical shift moves every height by as much
@@ -91,6 +103,75 @@ def swing_clearance(model, qpos: np.ndarray, dt: float, config: ShapingConfig) -
     """
     out = qpos.copy()
     _lift_swing_feet(model, out, _Geometry(model, qpos), dt, config)
+    return out
+
+
+_ANKLE_STEPS = -np.linspace(0.05, 1.0, 20)  # rad: candidate dorsiflexions, smallest first
+
+
+def flatten_toe_off(model, qpos: np.ndarray, dt: float, config: ShapingConfig | None = None) -> np.ndarray:
+    """qpos (N, 70) at step ``dt`` with the ankles dorsiflexed at push-offs into flight (a new array).
+
+    A frame is flattened on one side when it lies within ``toe_off_lead`` seconds before a flight frame
+    (:func:`flight_frames`) and that foot's toe box dips under the floor and lower than its heel (ankle)
+    box: the ankle's y hinge turns by the smallest of 20 steps up to 1 rad (within its limit) that lifts
+    the toe box to the floor or to the heel's height, whichever is lower.
+    """
+    cfg = config or ShapingConfig()
+    out = qpos.copy()
+    flight = flight_frames(model, qpos, dt, cfg.flight_load)
+    lead = max(int(round(cfg.toe_off_lead / dt)), 0)
+    gate = flight.copy()
+    for s in range(1, lead + 1):
+        gate[:-s] |= flight[s:]
+    if not gate.any():
+        return out
+    for side in ("left", "right"):
+        geoms = np.array([model.geom(f"{side}_foot").id, model.geom(f"{side}_ankle").id])
+        hinge = model.joint(f"{side}_ankle_y")
+        adr, (lo, hi) = int(hinge.qposadr[0]), model.jnt_range[hinge.id]
+        _, gpos, gmat = pose_frames(model, out)
+        toe, heel = lowest_of(model, gpos, gmat, geoms).T
+        frames = np.flatnonzero(gate & (toe < 0.0) & (toe < heel))
+        if not len(frames):
+            continue
+        target = np.minimum(heel[frames], 0.0) - 1e-4
+        turn = np.zeros(len(frames))
+        todo = np.ones(len(frames), dtype=bool)
+        for step in _ANKLE_STEPS:
+            q = out[frames[todo]]
+            q[:, adr] = np.clip(q[:, adr] + step, lo, hi)
+            _, gpos, gmat = pose_frames(model, q)
+            done = lowest_of(model, gpos, gmat, geoms[:1])[:, 0] >= target[todo]
+            idx = np.flatnonzero(todo)[done]
+            turn[idx], todo[idx] = step, False
+            if not todo.any():
+                break
+        out[frames, adr] = np.clip(out[frames, adr] + turn, lo, hi)  # frames never lifted keep turn 0
+    return out
+
+
+def flight_frames(model, qpos: np.ndarray, dt: float, load: float) -> np.ndarray:
+    """(N,) bool: frames of qpos (N, 70) at step ``dt`` whose centre of mass accelerates downward by more
+    than (1 - load) g, so that the feet could carry less than ``load`` of the body weight."""
+    if len(qpos) < 3:
+        return np.zeros(len(qpos), dtype=bool)
+    height = _com_heights(model, qpos)
+    support = 1.0 + np.gradient(np.gradient(height, dt), dt) / STANDARD_GRAVITY
+    return support < load
+
+
+def _com_heights(model, qpos: np.ndarray) -> np.ndarray:
+    """(N,) height (MuJoCo z) of the whole body's centre of mass in each frame of qpos (N, 70)."""
+    import mujoco
+
+    data = mujoco.MjData(model)
+    mass = model.body_mass[1:]
+    out = np.empty(len(qpos))
+    for k in range(len(qpos)):
+        data.qpos[:] = qpos[k]
+        mujoco.mj_kinematics(model, data)
+        out[k] = mass @ data.xipos[1:, 2] / mass.sum()
     return out
 
 

@@ -146,8 +146,9 @@ def simulate(
         force = torque = 0.0
         for s in range(every, cfg.substeps + 1, every):
             # The wrench held over simulation steps s - every + 1 .. s is the one ending at step s.
-            wrench = qfrc[:6] + controller.residual(data, ref, k * cfg.substeps + s, cfg.substeps)
-            data.qfrc_applied[:6] = wrench
+            applied = qfrc + controller.residual(data, ref, k * cfg.substeps + s, cfg.substeps)
+            data.qfrc_applied[:] = applied
+            wrench = applied[:6]
             force += math.hypot(*wrench[:3])
             torque += math.hypot(*wrench[3:])
             mujoco.mj_step(model, data, every)

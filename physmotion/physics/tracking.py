@@ -52,6 +52,10 @@ class TrackingConfig:
     contact_height: float = 0.02  # m: a foot-box corner this close to the floor can push
     friction: float = 0.8  # friction pyramid slope for the contact split (below the geoms' 1.0)
     feedforward: bool = True
+    # Route the root wrench (feed-forward leftover + root PD) through the feet that touch the floor in the
+    # simulation first: foot forces in the friction pyramid (NNLS), made by the legs' joint torques; only
+    # what the feet cannot carry is left to the residual (docs/decisions.md: "balance through the feet").
+    feet_balance: bool = True
 
 
 @dataclass
@@ -240,6 +244,12 @@ class ModelBasedTracker:
         # Position actuators in qpos order: actuator i drives dof 6 + i (see humanoid.build_mjcf).
         self.kp = model.actuator_gainprm[:, 0]
         self.kv = -model.actuator_biasprm[:, 2]
+        self._limits = np.abs(model.actuator_forcerange[:, 1])
+        feet = [model.body(n).id for n in JOINT_NAMES if "ankle" in n or "foot" in n]
+        self._is_foot = np.zeros(model.nbody, dtype=bool)
+        self._is_foot[feet] = True
+        self._pyr = _pyramid(self.config.friction)
+        self._jac = np.zeros((3, model.nv))
 
     def act(self, data, ref: Reference, k: int) -> tuple[np.ndarray, np.ndarray]:
         """Actuator targets for the control step k -> k+1 (ctrl (nu,); qfrc (nv,) is zero here).
@@ -280,9 +290,40 @@ class ModelBasedTracker:
         w = [ox * r[j] + oy * r[3 + j] + oz * r[6 + j] - v[3 + j] for j in range(3)]
         rkp, rkd = cfg.root_rot_kp, cfg.root_rot_kd
         torque = [tx + rkp * e[0] + rkd * w[0], ty + rkp * e[1] + rkd * w[1], tz + rkp * e[2] + rkd * w[2]]
+        out = np.zeros(self.model.nv)
+        if cfg.feet_balance:
+            wrench = np.array(force + torque)
+            joint, carried = self._through_feet(data, wrench)
+            out[6:] = joint
+            rest = (wrench - carried).tolist()
+            force, torque = rest[:3], rest[3:]
         force = _clip_norm(force, self.max_force)
         force[2] = min(force[2], self.max_lift)  # MuJoCo z is up
-        return np.array(force + _clip_norm(torque, self.max_torque))
+        out[:6] = force + _clip_norm(torque, self.max_torque)
+        return out
+
+    def _through_feet(self, data, wrench: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Joint torques (nv - 6,) that make the feet on the floor push the root with as much of ``wrench``
+        (6,) as the friction pyramid allows, and the root wrench (6,) they carry."""
+        import mujoco
+
+        n = data.ncon
+        if n == 0:
+            return np.zeros(self.model.nv - 6), np.zeros(6)
+        pairs = data.contact.geom[:n]
+        bodies = self.model.geom_bodyid[pairs[:, 1]]
+        use = np.nonzero((pairs[:, 0] == 0) & self._is_foot[bodies])[0]
+        if len(use) == 0:
+            return np.zeros(self.model.nv - 6), np.zeros(6)
+        jac = np.empty((len(use), 3, self.model.nv))
+        for i, c in enumerate(use):
+            mujoco.mj_jac(self.model, data, jac[i], None, data.contact.pos[c], int(bodies[c]))
+        gen = np.einsum("pcv,ec->pev", jac, self._pyr).reshape(-1, self.model.nv)
+        a = gen[:, :6].T
+        m = a.shape[1]
+        coef, _ = nnls(np.vstack([a, 1e-3 * np.eye(m)]), np.concatenate([wrench, np.zeros(m)]))
+        total = coef @ gen
+        return np.clip(-total[6:], -self._limits, self._limits), total[:6]
 
 
 def _clip_norm(v: list[float], bound: float) -> list[float]:
