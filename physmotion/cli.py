@@ -181,7 +181,9 @@ def project_motion(
     result = project(motion.joints, motion.fps)
     body = result.body if result.selected else None  # the input kept is not the humanoid's motion
     resets = int(result.resets) if result.selected else None
-    replace(motion, joints=result.joints, rotations=None, offsets=None, humanoid=body, resets=resets).save(out)
+    residual = result.residual if result.selected else None
+    replace(motion, joints=result.joints, rotations=None, offsets=None, humanoid=body, resets=resets,
+            residual=residual).save(out)
     kept = "simulation kept" if result.selected else "tracking failed: input kept (flagged)"
     console.print(
         f"wrote {out}: {kept}; MPJPE mean {1000 * result.mpjpe.mean():.0f} mm, "
@@ -213,7 +215,8 @@ def metrics(
     (a/x.npz and b/x.npz stay apart). Where the table is wider than the terminal the columns are
     numbered and a legend names the files."""
     from physmotion.metrics import physical_metrics
-    from physmotion.metrics.report import check_npz, fit_table, path_labels, table_width, to_csv, to_json
+    from physmotion.metrics.report import (check_npz, fit_table, path_labels, residual_summary, table_width,
+                                           to_csv, to_json)
     from physmotion.motion import Motion, write_atomic
 
     if surface not in ("humanoid", "joints"):
@@ -236,7 +239,7 @@ def metrics(
             from physmotion.physics.surface import HumanoidSurface
 
             body = HumanoidSurface(motion.humanoid)  # P's body where the file has it, else estimated
-        results[label] = physical_metrics(motion.joints, fps=motion.fps, body=body)
+        results[label] = physical_metrics(motion.joints, fps=motion.fps, body=body) | residual_summary(motion)
     if fmt is None:
         table, legend = fit_table(results, f"physical metrics ({surface} surface)", console.width)
         # A table that still does not fit prints whole (wider than the terminal) rather than with cut cells.

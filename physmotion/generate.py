@@ -125,14 +125,17 @@ def generate(
     joints = [recover_from_ric(f.astype(np.float64)) for f in feats]
     bodies: list[np.ndarray | None] = [None] * len(joints)
     resets = [0] * len(joints)
+    residuals: list[np.ndarray | None] = [None] * len(joints)
     if mode.kind == PHYSDIFF and hook_steps[-1:] == [cfg.sampler.steps - 1]:
         # The last step was projected, and DDIM's last step returns x0 itself: the output is P's
         # simulated motion, kept in physical coordinates (soles on the floor) rather than re-floored.
         joints, bodies, resets = projector.last_joints, list(projector.last_bodies), projector.last_resets
+        residuals = list(projector.last_residuals)
     if mode.kind == POST:
         for k in range(mode.projections):
             joints = projector.project_joints([on_data_floor(j) if k else j for j in joints])
             bodies, resets = list(projector.last_bodies), projector.last_resets
+            residuals = list(projector.last_residuals)
             if on_step:
                 on_step(cfg.sampler.steps + k + 1, total)
     failed: list[bool] = []
@@ -147,6 +150,7 @@ def generate(
         joints = [floor_first_frame(j, physical=True) if f else j for j, f in zip(joints, failed)]
         bodies = [None if f else b for b, f in zip(projector.last_bodies, failed)]
         resets = projector.last_resets
+        residuals = [None if f else r for r, f in zip(projector.last_residuals, failed)]
         if on_step:
             on_step(cfg.sampler.steps + 1, total)
     if mode.kind == FLOOR:
@@ -156,8 +160,9 @@ def generate(
     motions = [
         Motion(joints=j, fps=FPS, texts=[p], licence_tag=model.licence_tag,
                source=f"physmotion generate ({mode})", humanoid=b,
-               resets=r if mode.projects and b is not None else None)
-        for j, p, b, r in zip(joints, prompts, bodies, resets)
+               resets=r if mode.projects and b is not None else None,
+               residual=res if mode.projects and b is not None else None)
+        for j, p, b, r, res in zip(joints, prompts, bodies, resets, residuals)
     ]
     return GenerateResult(motions=motions, features=list(feats), projections=projector.log,
                           resets=list(resets), imitation_failed=failed)

@@ -29,6 +29,9 @@ class Motion:
     geometry on the joints instead of one estimated from them.
     resets: for P's output, how often the humanoid fell and was put back on the motion (each a jump in
     the joints); None where P was not applied.
+    residual: (T, 2) float32, for P's output the root residual it applied in each frame: force in body
+    weights, torque in body weight x 1 m (``ProjectedMotion.residual_force`` / ``residual_torque``);
+    None where P was not applied.
     """
 
     joints: np.ndarray
@@ -40,6 +43,7 @@ class Motion:
     source: str = ""
     humanoid: np.ndarray | None = None
     resets: int | None = None
+    residual: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if np.asarray(self.joints).dtype.kind not in "fiu":
@@ -54,6 +58,11 @@ class Motion:
             if self.humanoid.shape != (NUM_JOINTS, 3) or not np.all(np.isfinite(self.humanoid)):
                 shape = self.humanoid.shape
                 raise ShapeError(f"humanoid must be finite rest offsets ({NUM_JOINTS}, 3), got {shape}")
+        if self.residual is not None:
+            self.residual = np.asarray(self.residual, dtype=np.float32)
+            if self.residual.shape != (self.num_frames, 2) or not np.all(np.isfinite(self.residual)):
+                shape = self.residual.shape
+                raise ShapeError(f"residual must be finite (T, 2) = ({self.num_frames}, 2), got {shape}")
 
     @property
     def num_frames(self) -> int:
@@ -74,7 +83,8 @@ class Motion:
         return replace(self, rotations=rot.astype(np.float32), offsets=offsets.astype(np.float32))
 
     def save(self, path: str | Path) -> None:
-        """Write an .npz (joints, rotations, offsets, humanoid, fps, text, licence_tag) atomically."""
+        """Write an .npz (joints, rotations, offsets, humanoid, resets, residual, fps, text, licence_tag)
+        atomically."""
         arrays: dict[str, np.ndarray] = {
             "joints": self.joints,
             "fps": np.float32(self.fps),
@@ -90,6 +100,8 @@ class Motion:
             arrays["humanoid"] = np.asarray(self.humanoid, dtype=np.float64)
         if self.resets is not None:
             arrays["resets"] = np.int64(self.resets)
+        if self.residual is not None:
+            arrays["residual"] = np.asarray(self.residual, dtype=np.float32)
         write_atomic(path, lambda f: np.savez(f, **arrays))
 
     @classmethod
@@ -118,6 +130,7 @@ class Motion:
                     source=str(data["source"]) if "source" in data else "",
                     humanoid=data["humanoid"] if "humanoid" in data else None,
                     resets=int(data["resets"]) if "resets" in data else None,
+                    residual=data["residual"] if "residual" in data else None,
                 )
                 _check_pose_arrays(motion, path)
                 return motion

@@ -79,12 +79,14 @@ class FeatureProjector:
         self.last_joints: list[np.ndarray] = []  # P's output of the latest call, physical coordinates
         self.last_bodies: list[np.ndarray] = []  # ... and the humanoid bodies it was simulated with
         self.last_resets: list[int] = []  # ... and how often each was reset
+        self.last_residuals: list[np.ndarray] = []  # ... and the root residual (T, 2) it used
 
     def project_joints(self, joints: list[np.ndarray]) -> list[np.ndarray]:
         """Project a list of joint arrays (T_i, 22, 3); motions of equal length go through in one batch."""
         out: list[np.ndarray] = [np.empty(0)] * len(joints)
         bodies: list[np.ndarray] = [np.empty(0)] * len(joints)
         resets = [0] * len(joints)
+        residuals: list[np.ndarray] = [np.empty(0)] * len(joints)
         by_len: dict[int, list[int]] = {}
         for i, j in enumerate(joints):
             by_len.setdefault(len(j), []).append(i)
@@ -92,6 +94,7 @@ class FeatureProjector:
             res = project(np.stack([joints[i] for i in idx]), self.fps, self.config)
             for k, i in enumerate(idx):
                 out[i], bodies[i], resets[i] = res.joints[k], res.body[k], int(res.resets[k])
+                residuals[i] = res.residual[k]
                 self.log.resets.append(resets[i])
                 self.log.selected.append(bool(res.selected[k]))
                 self.log.tracked.append(bool(res.success[k]))
@@ -99,6 +102,7 @@ class FeatureProjector:
                 self.log.residual.append(float(res.residual_force[k].mean()))
         self.log.calls += 1
         self.last_joints, self.last_bodies, self.last_resets = out, bodies, resets
+        self.last_residuals = residuals
         return out
 
     def __call__(self, x0: torch.Tensor, lengths: list[int]) -> torch.Tensor:

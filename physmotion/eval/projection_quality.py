@@ -1,5 +1,6 @@
-"""The physics projection on captured clips: which clips the issue's targets speak of, and how one clip
-is measured. Shared by ``bench/projection_quality.py`` (all clips) and the tests (a subset).
+"""The physics projection on captured clips: which clips the targets speak of (walking/running, and every
+clip by category of motion), how one clip is measured, and the per-category summary. Shared by
+``bench/projection_quality.py``, ``scripts/projection_dynamic.py`` and the tests.
 """
 
 from __future__ import annotations
@@ -20,6 +21,35 @@ from physmotion.physics.workers import map_in_workers
 LOCOMOTION = re.compile(r"\b(walk|walks|walking|run|runs|running|jog|jogs|jogging)\b")
 """A clip whose first caption matches is a walking/running clip."""
 
+CATEGORIES: dict[str, re.Pattern[str]] = {
+    "jump": re.compile(r"\b(jump|jumps|jumping|hop|hops|hopping|leap|leaps|leaping)\b"),
+    "kick": re.compile(r"\b(kick|kicks|kicking)\b"),
+    "dance": re.compile(r"\b(dance|dances|dancing|ballet|charleston|lambada|salsa)\b"),
+    "run": re.compile(r"\b(run|runs|running|jog|jogs|jogging|sprint|sprints|dash|dashes)\b"),
+    "turn": re.compile(r"\b(turn|turns|turning|spin|spins|pivot|pivots|twirl|twirls)\b"),
+    "walk": re.compile(r"\b(walk|walks|walking|step|steps|stroll|strolls|march|marches)\b"),
+}
+"""Categories of motion by the words of a clip's captions, checked in this order (a clip that "jumps and
+turns" is a jump; "walks and turns" a turn); a clip no pattern matches is "other"."""
+
+AIRBORNE_HEIGHT = 0.02
+"""m: a frame is airborne when no foot contact patch (heel or toe box) is this close to the floor. 2 cm
+rather than the metrics' 5 mm tolerance, because captured feet are modelled by rigid boxes: a captured
+stance foot often hovers a centimetre above the floor on them."""
+
+
+def category(captions: list[str]) -> str:
+    """The category of a clip (:data:`CATEGORIES`, else "other") from all its captions."""
+    text = " | ".join(captions).lower()
+    return next((name for name, pattern in CATEGORIES.items() if pattern.search(text)), "other")
+
+
+def airborne_share(joints: np.ndarray, surface: HumanoidSurface) -> float:
+    """Share of the frames of ``joints`` (T, 22, 3) in which no foot patch of ``surface`` is within
+    :data:`AIRBORNE_HEIGHT` of the floor (y = 0)."""
+    feet = surface.foot_heights(np.asarray(joints, dtype=np.float64))  # (T, 4)
+    return float((feet.min(axis=-1) > AIRBORNE_HEIGHT).mean())
+
 
 def locomotion_clips(mocap_dir: str | Path) -> list[ClipInfo]:
     """The walking and running clips of a mocap directory, in manifest order."""
@@ -35,6 +65,8 @@ class ClipProjection:
     result: ProjectedMotion
     before: dict[str, float]
     after: dict[str, float]
+    airborne_before: float = 0.0  # share of frames with both feet off the floor (airborne_share)
+    airborne_after: float = 0.0
 
 
 def measure_projection(
@@ -46,7 +78,8 @@ def measure_projection(
     surface = HumanoidSurface(body)
     before = physical_metrics(grounded, fps=fps, body=surface)
     after = physical_metrics(result.simulated, fps=fps, body=surface)
-    return ClipProjection(result, before, after)
+    return ClipProjection(result, before, after, airborne_share(grounded, surface),
+                          airborne_share(result.simulated, surface))
 
 
 def measure_clips(
@@ -60,3 +93,44 @@ def measure_clips(
 def _measure_clip(info: ClipInfo, config: ProjectionConfig | None) -> ClipProjection:
     motion = import_clip(info)
     return measure_projection(motion.joints, motion.fps, config)
+
+
+SUMMARY_METRICS = ("penetrate", "float", "skate", "phys_err")
+
+
+def summarize(measured: list[ClipProjection]) -> dict[str, float]:
+    """One row over clips: ``clips``, ``success`` (share), ``mpjpe_mm`` (mean over all clips), the metrics of
+    input and output (``<metric>_in`` / ``_out``, mm, means over clips), airborne shares of input and
+    output, and the residual force and torque (mean over all frames, p95 over all frames; x W, x W m)."""
+    if not measured:
+        return {"clips": 0}
+    force = np.concatenate([m.result.residual_force for m in measured])
+    torque = np.concatenate([m.result.residual_torque for m in measured])
+    row = {
+        "clips": len(measured),
+        "success": float(np.mean([bool(m.result.success) for m in measured])),
+        "mpjpe_mm": float(1000 * np.mean([m.result.mpjpe.mean() for m in measured])),
+    }
+    for key in SUMMARY_METRICS:
+        row[f"{key}_in"] = float(np.mean([m.before[key] for m in measured]))
+        row[f"{key}_out"] = float(np.mean([m.after[key] for m in measured]))
+    row |= {
+        "airborne_in": float(np.mean([m.airborne_before for m in measured])),
+        "airborne_out": float(np.mean([m.airborne_after for m in measured])),
+        "residual_force_mean": float(force.mean()), "residual_force_p95": float(np.percentile(force, 95)),
+        "residual_torque_mean": float(torque.mean()), "residual_torque_p95": float(np.percentile(torque, 95)),
+    }
+    return row
+
+
+def by_category(clips: list[ClipInfo], measured: list[ClipProjection]) -> dict[str, dict[str, float]]:
+    """:func:`summarize` per category (:func:`category`, in the order of :data:`CATEGORIES`, then "other",
+    then "all"), plus "walks+runs" (:func:`locomotion_clips`' rule), the set the residual target speaks of."""
+    groups: dict[str, list[ClipProjection]] = {name: [] for name in (*CATEGORIES, "other")}
+    for info, m in zip(clips, measured):
+        groups[category(info.captions)].append(m)
+    rows = {name: summarize(ms) for name, ms in groups.items() if ms}
+    rows["walks+runs"] = summarize([m for info, m in zip(clips, measured)
+                                    if LOCOMOTION.search(info.captions[0].lower())])  # fmt: skip
+    rows["all"] = summarize(measured)
+    return rows

@@ -117,6 +117,14 @@ METRICS: dict[str, MetricInfo] = {
         MetricInfo("skate", "mm", "PhysDiff", "frames", 1, "lower",
                    "horizontal displacement of foot joints in contact in two adjacent frames"),
         MetricInfo("phys_err", "mm", "PhysDiff", "sum", 0, "lower", "Penetrate + Float + Skate"),
+        # Recorded by P in its output (Motion.residual), not measured from the joints: how much of the
+        # motion the non-physical root wrench carried (PhysDiff's residual force control).
+        MetricInfo("residual_force", "x W", "PhysDiff (RFC)", "frames", 0, "lower",
+                   "mean root residual force the projection applied, in body weights (recorded by P)"),
+        MetricInfo("residual_force_p95", "x W", "PhysDiff (RFC)", "frames", 0, "lower",
+                   "95th percentile over frames of the root residual force (recorded by P)"),
+        MetricInfo("residual_torque", "x W m", "PhysDiff (RFC)", "frames", 0, "lower",
+                   "mean root residual torque the projection applied, in body weight x 1 m (recorded by P)"),
         MetricInfo("pfc", "score", "EDGE/Morph", "motions", 2, "lower",
                    "physical foot contact x 1e4: min foot step left x right x normalised root acceleration"),
         MetricInfo("skate_ratio", "ratio", "BioMoDiffuse (GMD)", "motions", 1, "closer to real",

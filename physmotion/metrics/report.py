@@ -10,6 +10,7 @@ import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
+import numpy as np
 from rich.console import Console
 from rich.table import Table
 
@@ -90,3 +91,14 @@ def to_csv(results: Mapping[str, Mapping[str, float]], paths: Sequence[str | Pat
     for (label, r), path in zip(results.items(), paths):
         writer.writerow([label, str(path), *(repr(float(r[n])) if n in r else "" for n in names)])
     return buf.getvalue()
+
+
+def residual_summary(motion) -> dict[str, float]:
+    """The root residual a projected :class:`~physmotion.motion.Motion` records (``Motion.residual``) as
+    metrics rows: mean and 95th percentile force (x W), mean torque (x W x 1 m); {} for a motion P did not
+    make."""
+    if motion.residual is None:
+        return {}
+    force, torque = motion.residual[:, 0].astype(np.float64), motion.residual[:, 1].astype(np.float64)
+    return {"residual_force": float(force.mean()), "residual_force_p95": float(np.percentile(force, 95)),
+            "residual_torque": float(torque.mean())}

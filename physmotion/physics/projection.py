@@ -93,6 +93,11 @@ class ProjectedMotion:
     body: np.ndarray
     resets: np.ndarray
 
+    @property
+    def residual(self) -> np.ndarray:
+        """(..., T, 2) float32: residual force and torque per frame, as :attr:`Motion.residual` stores it."""
+        return np.stack([self.residual_force, self.residual_torque], axis=-1).astype(np.float32)
+
 
 def as_joints(motion: np.ndarray) -> tuple[np.ndarray, bool]:
     """Joints (B, T, 22, 3) float64 from joints or HumanML3D features (263 or 329, not normalised).
