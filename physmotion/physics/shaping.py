@@ -50,12 +50,15 @@ class ShapingConfig:
     # A fast foot on the floor under a slow foot in the air is a swing foot that dipped into the floor
     # (grounding then lifted the frame by it): lift it above the slow foot and lower the frame onto that.
     stance_by_speed: bool = True
-    # flatten_toe_off: dorsiflex the ankle where the toe box dips under the floor and under its heel, in
-    # the ``toe_off_lead`` seconds before a flight phase: a frame where the reference's centre of mass
-    # falls faster than (1 - ``flight_load``) g, i.e. the feet would carry less than that share of W.
+    # flatten_toe_off: dorsiflex the ankle where the toe box dips more than ``toe_off_depth`` under the
+    # floor and under its heel, in the ``toe_off_lead`` seconds before a flight phase: a frame where the
+    # reference's centre of mass falls faster than (1 - ``flight_load``) g, i.e. the feet would carry less
+    # than that share of W. Flattened fully (depth 0) the simulated runner pushed off too little, landed
+    # early and skidded (docs/decisions.md: "toe-off flattened before flight").
     flatten_toe_off: bool = True
-    toe_off_lead: float = 0.2
-    flight_load: float = 0.3
+    toe_off_lead: float = 0.2  # s
+    flight_load: float = 0.3  # fraction of W
+    toe_off_depth: float = 0.005  # m
 
 
 def shape_reference(model, qpos: np.ndarray, dt: float, config: ShapingConfig | None = None) -> np.ndarray:
@@ -113,9 +116,9 @@ def flatten_toe_off(model, qpos: np.ndarray, dt: float, config: ShapingConfig | 
     """qpos (N, 70) at step ``dt`` with the ankles dorsiflexed at push-offs into flight (a new array).
 
     A frame is flattened on one side when it lies within ``toe_off_lead`` seconds before a flight frame
-    (:func:`flight_frames`) and that foot's toe box dips under the floor and lower than its heel (ankle)
-    box: the ankle's y hinge turns by the smallest of 20 steps up to 1 rad (within its limit) that lifts
-    the toe box to the floor or to the heel's height, whichever is lower.
+    (:func:`flight_frames`) and that foot's toe box dips more than ``toe_off_depth`` under the floor and
+    lower than its heel (ankle) box: the ankle's y hinge turns by the smallest of 20 steps up to 1 rad
+    (within its limit) that lifts the toe box to that depth or to the heel's height, whichever is lower.
     """
     cfg = config or ShapingConfig()
     out = qpos.copy()
@@ -132,10 +135,10 @@ def flatten_toe_off(model, qpos: np.ndarray, dt: float, config: ShapingConfig | 
         adr, (lo, hi) = int(hinge.qposadr[0]), model.jnt_range[hinge.id]
         _, gpos, gmat = pose_frames(model, out)
         toe, heel = lowest_of(model, gpos, gmat, geoms).T
-        frames = np.flatnonzero(gate & (toe < 0.0) & (toe < heel))
+        frames = np.flatnonzero(gate & (toe < -cfg.toe_off_depth) & (toe < heel))
         if not len(frames):
             continue
-        target = np.minimum(heel[frames], 0.0) - 1e-4
+        target = np.minimum(heel[frames], -cfg.toe_off_depth) - 1e-4
         turn = np.zeros(len(frames))
         todo = np.ones(len(frames), dtype=bool)
         for step in _ANKLE_STEPS:
