@@ -28,6 +28,7 @@ from physmotion.features.humanml3d import FEATURE_DIM, recover_from_ric
 from physmotion.physics.humanoid import HumanoidConfig, body_from_joints, build_model, foot_lift
 from physmotion.physics.retarget import joints_to_qpos, qpos_to_joints
 from physmotion.physics.shaping import ShapingConfig, shape_reference
+from physmotion.physics.surface import body_lowest, pose_frames
 from physmotion.physics.sim import Rollout, simulate
 from physmotion.physics.tracking import ModelBasedTracker, TrackingConfig, prepare_reference
 from physmotion.physics.workers import map_in_workers
@@ -54,14 +55,25 @@ class ProjectionConfig:
     # What the tracker is asked to follow: the reference out of the floor, swing feet a little higher
     # (physics/shaping.py has the measurements).
     shaping: ShapingConfig = field(default_factory=ShapingConfig)
+    # A motion whose lowest point stays more than ``support_height`` above the floor for longer than
+    # ``unsupported_seconds`` is not grounded: something we do not simulate holds it up (a chair, a bar,
+    # a ladder), as Morph's hand-flagged non-grounded motions. Imitation selection rejects it, rather
+    # than keep the humanoid's imitation of it on the floor. A jump's flight lasts well under a second.
+    support_height: float = 0.10  # m
+    unsupported_seconds: float = 1.0
 
     @classmethod
     def sampling(cls, **overrides) -> ProjectionConfig:
         """The preset generation uses (physdiff and post): a fall (error past tau = 0.15 m) puts the
         humanoid back on the motion, or moves the motion to it where it only drifted, so P always returns
         a simulated motion; each reset is counted (``ProjectedMotion.resets``). tau 0.15 m beat 0.2-0.5 m
-        on PhysDiff's Phys-Err (docs/decisions.md: "sampling projection: reset at 0.15 m")."""
-        return cls(**{"reset_on_fail": True, "tau": 0.15, **overrides})
+        on PhysDiff's Phys-Err (docs/decisions.md: "sampling projection: reset at 0.15 m").
+
+        The root wrench is not carried by the feet here (``TrackingConfig.feet_balance`` off): on the
+        denoiser's intermediate motions it doubled the share of outputs with a reset (docs/decisions.md:
+        "balance through the feet")."""
+        defaults = {"reset_on_fail": True, "tau": 0.15, "tracking": TrackingConfig(feet_balance=False)}
+        return cls(**{**defaults, **overrides})
 
 
 @dataclass
@@ -77,7 +89,9 @@ class ProjectedMotion:
     resets: (B,) int, how often the humanoid was put back on the reference (``reset_on_fail``): each is a
     jump (teleport) in the simulated motion.
     With ``follow_drift`` a body that only drifted counts as a success; its ``mpjpe`` to the input grows.
-    selected: (B,) the simulation was kept (MPJPE below ``tau`` throughout).
+    selected: (B,) the simulation was kept (MPJPE below ``tau`` throughout, and the motion grounded).
+    grounded: (B,) the input never stays off the floor for long (``ProjectionConfig.support_height``,
+    ``unsupported_seconds``); a motion that does is rejected by imitation selection whatever its MPJPE.
     body: (B, 22, 3) float64 rest offsets of the humanoid each motion was simulated with (bone lengths,
     fitted feet): the surface to measure the simulated motion on (``HumanoidSurface(body)``).
     """
@@ -92,6 +106,7 @@ class ProjectedMotion:
     selected: np.ndarray
     body: np.ndarray
     resets: np.ndarray
+    grounded: np.ndarray
 
     @property
     def residual(self) -> np.ndarray:
@@ -170,18 +185,29 @@ def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig) -> dict[st
     model = build_model(body, config.humanoid)
     lift = foot_lift(body, config.humanoid)
     qpos = resample_qpos(joints_to_qpos(x, model, lift=lift, config=config.humanoid), fps, ctrl_fps)
+    grounded = _grounded(model, qpos, ctrl_fps, config)
     qpos = shape_reference(model, qpos, config.humanoid.control_dt, config.shaping)
     ref = prepare_reference(model, qpos, config.humanoid.control_dt, config.tracking)
     tracker = ModelBasedTracker(model, config.tracking)
     roll = simulate(model, ref, tracker, config.humanoid, fail_mpjpe=config.tau,
                     reset_on_fail=config.reset_on_fail, follow_drift=config.follow_drift)
-    out = _back_to_input_rate(roll, model, lift, x, fps, ctrl_fps, config.tau, config.reset_on_fail)
-    return out | {"body": body}
+    out = _back_to_input_rate(roll, model, lift, x, fps, ctrl_fps, config.tau, config.reset_on_fail, grounded)
+    return out | {"body": body, "grounded": np.array(grounded)}
+
+
+def _grounded(model, qpos: np.ndarray, rate: float, config: ProjectionConfig) -> bool:
+    """Whether the retargeted motion qpos (N, 70) at ``rate`` never keeps its lowest point above
+    ``config.support_height`` for longer than ``config.unsupported_seconds``."""
+    _, gpos, gmat = pose_frames(model, qpos)
+    up = np.concatenate([[False], body_lowest(model, gpos, gmat) > config.support_height, [False]])
+    edges = np.flatnonzero(np.diff(up.astype(np.int8)))  # starts and ends of each run off the floor
+    longest = int((edges[1::2] - edges[::2]).max()) if len(edges) else 0
+    return longest <= config.unsupported_seconds * rate
 
 
 def _back_to_input_rate(
     roll: Rollout, model, lift: float, joints: np.ndarray, fps: float, ctrl_fps: float, tau: float,
-    keep_simulated: bool = False,
+    keep_simulated: bool = False, grounded: bool = True,
 ) -> dict[str, np.ndarray]:
     """One rollout (control rate) as arrays at the input rate, with imitation selection applied (unless
     ``keep_simulated``: then the simulation, reset where it failed, is always returned)."""
@@ -191,7 +217,7 @@ def _back_to_input_rate(
     mpjpe = np.linalg.norm(sim - raised, axis=-1).mean(-1)
     nearest = np.minimum(np.round(np.arange(t) * ctrl_fps / fps).astype(int), len(roll.qpos) - 1)
     success = roll.failed_at is None
-    selected = keep_simulated or (success and float(mpjpe.max()) < tau)
+    selected = keep_simulated or (success and grounded and float(mpjpe.max()) < tau)
     return {
         "joints": (sim if selected else joints).astype(np.float32),
         "simulated": sim.astype(np.float32),

@@ -116,16 +116,18 @@ def test_a_dragged_root_skates_less(mocap_dir) -> None:
 
 
 def test_follow_drift_moves_the_motion_to_a_body_that_drifted(walk: np.ndarray) -> None:
-    """A walk whose root travels 1.8 times as far as its steps carry it (its feet slide, as generated
-    motions' do): the body falls behind. Reset onto the motion, it jumps; followed, it walks on."""
+    """A walk whose root travels 2.5 times as far as its steps carry it (its feet slide, as generated
+    motions' do): the body falls behind. Reset onto the motion, it jumps; followed, it walks on. (With
+    the root wrench carried by the feet, a body keeps up with a root 1.8 times as fast as its steps, so
+    the slide is larger than it was before that change.)"""
     root = walk[:, 0, :] - walk[0, 0, :]
-    sliding = walk + 0.8 * root[:, None, :] * np.array([1.0, 0.0, 1.0])
-    reset = project(sliding, config=ProjectionConfig(reset_on_fail=True, tau=0.2, follow_drift=False))
-    followed = project(sliding, config=ProjectionConfig(reset_on_fail=True, tau=0.2))
+    sliding = walk + 1.5 * root[:, None, :] * np.array([1.0, 0.0, 1.0])
+    reset = project(sliding, config=ProjectionConfig(reset_on_fail=True, tau=0.3, follow_drift=False))
+    followed = project(sliding, config=ProjectionConfig(reset_on_fail=True, tau=0.3))
     step = {name: np.linalg.norm(np.diff(out.simulated[:, 0], axis=0), axis=-1).max()
             for name, out in (("reset", reset), ("followed", followed))}  # fmt: skip
     print(f"\nlargest pelvis step per frame: reset {step['reset']:.2f} m, followed {step['followed']:.2f} m")
-    assert not reset.success and step["reset"] > 0.25  # measured 0.31 m in one frame: a teleport
+    assert not reset.success and step["reset"] > 0.25  # measured 0.33 m in one frame: a teleport
     assert followed.success and step["followed"] < 0.15  # measured 0.11 m (2.2 m/s)
     assert followed.mpjpe.max() > 0.5  # it was moved: far from the input's absolute positions
 

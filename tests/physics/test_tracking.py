@@ -97,16 +97,45 @@ def test_failure_ends_the_episode(real_walk: np.ndarray) -> None:
 @pytest.mark.parametrize("bound", [0.02, 0.1])
 def test_commanded_residual_respects_its_bound(real_walk: np.ndarray, bound: float) -> None:
     model, ref = _standing_reference(real_walk, seconds=0.5)
+    """The bound on the residual itself: the feet carry nothing here (feet_balance off), so the root PD's
+    pull is clipped to the bound, and its upward part to the lift cap."""
     ref.qpos[:, 2] += 0.2  # ask for a float: the root PD pulls up as hard as it may
-    tracker = ModelBasedTracker(model, TrackingConfig(residual_force=bound, residual_torque=bound))
+    tracker = ModelBasedTracker(model, TrackingConfig(residual_force=bound, residual_torque=bound,
+                                                      feet_balance=False))  # fmt: skip
     data = mujoco.MjData(model)
     data.qpos[:] = ref.qpos[0] - np.r_[0, 0, 0.2, np.zeros(model.nq - 3)]
     mujoco.mj_forward(model, data)
     wrench = tracker.residual(data, ref, 1, 2)
     assert np.linalg.norm(wrench[:3]) == pytest.approx(bound * tracker.weight, rel=1e-6)
     assert np.linalg.norm(wrench[3:6]) <= bound * tracker.weight + 1e-9
-    capped = ModelBasedTracker(model, TrackingConfig(residual_force=bound, residual_lift=0.01))
+    capped = ModelBasedTracker(model, TrackingConfig(residual_force=bound, residual_lift=0.01,
+                                                     feet_balance=False))  # fmt: skip
     assert capped.residual(data, ref, 1, 2)[2] == pytest.approx(0.01 * capped.weight)  # upward cap
+
+
+def test_feet_on_the_floor_carry_the_root_wrench(real_walk: np.ndarray) -> None:
+    """Standing on both feet, asked to rise 2 cm: without feet_balance the residual lifts the root (up to
+    its 0.1 W cap); with it, the legs push the floor and the residual is nothing (measured 1e-7 W, joint
+    torques up to 6.6 N m), within the actuators' limits."""
+    model, ref = _standing_reference(real_walk, seconds=0.5)
+    data = mujoco.MjData(model)
+    data.qpos[:] = ref.qpos[0]
+    mujoco.mj_forward(model, data)
+    assert data.ncon > 0
+    ref.qpos[:, 2] += 0.02
+    plain = ModelBasedTracker(model, TrackingConfig(feet_balance=False)).residual(data, ref, 1, 2)
+    tracker = ModelBasedTracker(model, TrackingConfig(feet_balance=True))
+    carried = tracker.residual(data, ref, 1, 2)
+    assert plain[2] == pytest.approx(0.1 * tracker.weight) and not plain[6:].any()
+    assert np.linalg.norm(carried[:3]) < 1e-3 * tracker.weight
+    joint = carried[6:]
+    assert np.abs(joint).max() > 1.0  # N m: the legs do the work
+    assert np.all(np.abs(joint) <= np.abs(model.actuator_forcerange[:, 1]) + 1e-9)
+    data.qpos[2] += 0.3  # in the air: nothing to push on, the residual is all there is
+    mujoco.mj_forward(model, data)
+    assert data.ncon == 0
+    airborne = tracker.residual(data, ref, 1, 2)
+    assert not airborne[6:].any() and airborne[2] < 0.0
 
 
 def test_humanoid_surface_reads_the_geoms(real_walk: np.ndarray) -> None:
