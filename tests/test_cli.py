@@ -1,5 +1,6 @@
 """The command line, run as a user runs it: a subprocess, its exit code, stdout/stderr and files."""
 
+import json
 import re
 import subprocess
 import sys
@@ -126,6 +127,14 @@ def test_project_writes_the_simulated_motion(mocap_dir: Path, tmp_path: Path) ->
     assert projected.joints.shape == (60, 22, 3) and not np.array_equal(projected.joints, short.joints)
     assert projected.licence_tag == short.licence_tag
     assert projected.humanoid is not None and projected.humanoid.shape == (22, 3)  # for `metrics`
+    # The root residual P applied is in the file, and `metrics` shows it (force in body weights).
+    assert projected.residual is not None and projected.residual.shape == (60, 2)
+    assert np.all(projected.residual >= 0.0) and projected.residual[:, 0].max() <= 0.3 + 1e-6
+    res = run("metrics", out, "--json")
+    shown = json.loads(res.stdout)["files"][0]["metrics"]
+    assert shown["residual_force"] == pytest.approx(float(projected.residual[:, 0].mean()), rel=1e-5)
+    assert shown["residual_force_p95"] >= shown["residual_force"]
+    assert "residual_force" not in json.loads(run("metrics", npz, "--json").stdout)["files"][0]["metrics"]
     res = run("project", tmp_path / "missing.npz", "-o", tmp_path / "x.npz")
     assert res.returncode == 1 and res.stderr.startswith("error: ") and not (tmp_path / "x.npz").exists()
 

@@ -33,6 +33,21 @@ def test_the_simulated_body_travels_with_the_motion(tmp_path: Path) -> None:
         Motion(_standing(), humanoid=np.full((22, 3), np.nan))
 
 
+def test_the_residual_travels_with_the_motion(tmp_path: Path) -> None:
+    """P's root residual per frame (force x W, torque x W m) is saved and read back; a wrong shape or a
+    NaN is refused."""
+    residual = np.stack([np.linspace(0, 0.3, 10), np.linspace(0, 0.1, 10)], axis=-1)
+    Motion(_standing(), residual=residual, resets=2).save(tmp_path / "p.npz")
+    back = Motion.load(tmp_path / "p.npz")
+    np.testing.assert_allclose(back.residual, residual.astype(np.float32))
+    assert back.resets == 2
+    assert Motion(_standing()).residual is None
+    with pytest.raises(ShapeError, match="residual"):
+        Motion(_standing(), residual=np.zeros((9, 2)))
+    with pytest.raises(ShapeError, match="residual"):
+        Motion(_standing(), residual=np.full((10, 2), np.nan))
+
+
 @pytest.mark.parametrize(
     "joints, message",
     [(np.zeros((5, 21, 3)), "shape"), (np.zeros((0, 22, 3)), "zero frames"),

@@ -311,6 +311,8 @@ def _npz_structures(motion: Motion) -> Iterator[tuple[str, bytes]]:
         "humanoid_shape": {"humanoid": np.ones(2)},
         "resets_vector": {"resets": np.arange(3)},
         "resets_text": {"resets": np.array("x")},
+        "residual_shape": {"residual": np.ones(3)},
+        "residual_nan": {"residual": np.full((t, 2), np.nan, np.float32)},
         "text_numbers": {"text": np.arange(3)},
         "licence_bytes": {"licence_tag": np.frombuffer(b"\xff\xfe", dtype=np.uint8)},
     }.items():

@@ -161,3 +161,48 @@ def test_a_swing_foot_dipped_into_the_floor_is_lifted_and_the_stance_foot_ground
     # This real walk has no such frames: it is shaped exactly as before.
     np.testing.assert_array_equal(shape_reference(model, qpos, DT, config),
                                   shape_reference(model, qpos, DT, ShapingConfig(stance_by_speed=False)))
+
+
+def test_toe_off_is_flattened_only_before_flight(mocap_dir) -> None:
+    """A Bandai sprint: its flight frames are found from the centre of mass, and only the ankles' y
+    hinges change, only within the lead before a flight, where the toe box dug into the floor; what is
+    flattened lies no deeper than ``toe_off_depth``. A walk (no flight) is left as it is."""
+    from physmotion.io.importer import import_clip, load_manifest
+    from physmotion.physics.shaping import flatten_toe_off, flight_frames
+
+    info = {c.clip: c for c in load_manifest(mocap_dir)}["bandai1_dataset-1_dash_proud_001"]
+    run = import_clip(info).joints.astype(np.float64)
+    body = body_from_joints(run)
+    model = build_model(body)
+    qpos = resample_qpos(joints_to_qpos(run, model, lift=foot_lift(body)), 20.0, 1.0 / DT)
+    cfg = ShapingConfig()
+    flight = flight_frames(model, qpos, DT, cfg.flight_load)
+    assert 0.05 < flight.mean() < 0.6  # a sprint flies in part of its frames
+    out = flatten_toe_off(model, qpos, DT, cfg)
+    ankles = [model.joint(f"{s}_ankle_y").qposadr[0] for s in ("left", "right")]
+    changed = np.abs(out - qpos) > 0
+    assert changed.any() and not np.delete(changed, ankles, axis=1).any()
+    lead = round(cfg.toe_off_lead / DT)
+    near = np.array([flight[k : k + lead + 1].any() for k in range(len(qpos))])
+    assert not changed[~near].any()
+    assert np.all(out[:, ankles] <= qpos[:, ankles] + 1e-12)  # dorsiflexed only (y: -)
+    from physmotion.physics.surface import lowest_of, pose_frames
+
+    for side, adr in zip(("left", "right"), ankles):
+        rows = np.flatnonzero(changed[:, adr])
+        geoms = np.array([model.geom(f"{side}_foot").id, model.geom(f"{side}_ankle").id])
+        _, gpos, gmat = pose_frames(model, qpos[rows])
+        toe_before, heel = lowest_of(model, gpos, gmat, geoms).T
+        _, gpos, gmat = pose_frames(model, out[rows])
+        toe = lowest_of(model, gpos, gmat, geoms[:1])[:, 0]
+        assert len(rows) and np.all(toe > toe_before) and toe_before.max() < -cfg.toe_off_depth
+        # Lifted to the allowed depth, or to the heel's height where the heel was deeper still.
+        assert np.all(toe >= np.minimum(heel, -cfg.toe_off_depth) - 1e-3)
+
+
+def test_a_walk_has_no_toe_off_to_flatten(walk_qpos) -> None:
+    from physmotion.physics.shaping import flatten_toe_off, flight_frames
+
+    model, qpos = walk_qpos
+    assert not flight_frames(model, qpos, DT, ShapingConfig().flight_load).any()
+    np.testing.assert_array_equal(flatten_toe_off(model, qpos, DT), qpos)
