@@ -125,12 +125,14 @@ def summarize(measured: list[ClipProjection]) -> dict[str, float]:
 
 def by_category(clips: list[ClipInfo], measured: list[ClipProjection]) -> dict[str, dict[str, float]]:
     """:func:`summarize` per category (:func:`category`, in the order of :data:`CATEGORIES`, then "other",
-    then "all"), plus "walks+runs" (:func:`locomotion_clips`' rule), the set the residual target speaks of."""
+    then "walks+runs": :func:`locomotion_clips`' rule, the set the residual target speaks of, where there
+    are any; then "all"). Categories without clips are left out."""
     groups: dict[str, list[ClipProjection]] = {name: [] for name in (*CATEGORIES, "other")}
     for info, m in zip(clips, measured):
         groups[category(info.captions)].append(m)
     rows = {name: summarize(ms) for name, ms in groups.items() if ms}
-    rows["walks+runs"] = summarize([m for info, m in zip(clips, measured)
-                                    if LOCOMOTION.search(info.captions[0].lower())])  # fmt: skip
+    locomotion = [m for info, m in zip(clips, measured) if LOCOMOTION.search(info.captions[0].lower())]
+    if locomotion:
+        rows["walks+runs"] = summarize(locomotion)
     rows["all"] = summarize(measured)
     return rows
