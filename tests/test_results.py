@@ -93,6 +93,24 @@ def morph_quotes() -> list[str]:
     ]
 
 
+def dynamic_quotes() -> list[str]:
+    """P on every captured clip by category (results/projection_dynamic.json, scripts/projection_dynamic.py)."""
+    configs = _load("projection_dynamic.json")["configs"]
+    now, before = configs["default"], configs["tracker v0.1"]
+    loco, run, jump = now["walks+runs"], now["run"], now["jump"]
+    return [
+        f"{100 * loco['success']:.1f} % tracked at {loco['mpjpe_mm']:.1f} mm",
+        f"(tracker v0.1: {100 * before['walks+runs']['success']:.1f} % at {before['walks+runs']['mpjpe_mm']:.1f} mm)",
+        f"residual {loco['residual_force_mean']:.3f} W mean, {loco['residual_force_p95']:.2f} W p95",
+        f"runs: Float {run['float_in']:.1f} -> {run['float_out']:.1f} mm (tracker v0.1: {before['run']['float_out']:.1f})",
+        f"airborne {100 * run['airborne_in']:.0f} -> {100 * run['airborne_out']:.0f} % "
+        f"(tracker v0.1: {100 * before['run']['airborne_out']:.0f} %)",
+        f"Skate {run['skate_in']:.1f} -> {run['skate_out']:.1f} mm",
+        f"MPJPE {run['mpjpe_mm']:.1f} mm",
+        f"jumps: Float {jump['float_in']:.1f} -> {jump['float_out']:.1f} mm",
+    ]
+
+
 QUOTES = {  # which doc quotes which result file
     ("README", "evaluate"): evaluate_quotes,
     ("README", "bench"): bench_quotes,
@@ -102,13 +120,15 @@ QUOTES = {  # which doc quotes which result file
     ("model card", "bench"): bench_quotes,
     ("README", "morph"): morph_quotes,
     ("morph card", "morph"): morph_quotes,
+    ("README", "dynamic"): dynamic_quotes,
+    ("results", "dynamic"): dynamic_quotes,
 }
 
 
 def _section(text: str, source: str) -> str:
     """The paragraph(s) of a doc that quote ``source``: those naming its file or command."""
     files = {"evaluate": "evaluate_default", "bench": "physdiff_quality", "schedule": "schedule_study",
-             "morph": "results/morph.md"}
+             "morph": "results/morph.md", "dynamic": "projection_dynamic"}
     marker = files[source]
     return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
 
