@@ -111,6 +111,14 @@ def dynamic_quotes() -> list[str]:
     ]
 
 
+def new_prompts_quotes() -> list[str]:
+    """The unseen-prompt bench (results/new_prompts_default.json): PhysDiff against none per category, and
+    the share of its projections in which the humanoid fell."""
+    runs = _load("new_prompts_default.json")["runs"]
+    return [f"{cat} {_change(rows[0][PHYSDIFF]['phys_err'], rows[0]['none']['phys_err'])} "
+            f"({100 * (1 - rows[0][PHYSDIFF]['tracked']):.0f} % fell)" for cat, rows in runs.items()]
+
+
 QUOTES = {  # which doc quotes which result file
     ("README", "evaluate"): evaluate_quotes,
     ("README", "bench"): bench_quotes,
@@ -122,13 +130,15 @@ QUOTES = {  # which doc quotes which result file
     ("morph card", "morph"): morph_quotes,
     ("README", "dynamic"): dynamic_quotes,
     ("results", "dynamic"): dynamic_quotes,
+    ("results", "new prompts"): new_prompts_quotes,
 }
 
 
 def _section(text: str, source: str) -> str:
     """The paragraph(s) of a doc that quote ``source``: those naming its file or command."""
     files = {"evaluate": "evaluate_default", "bench": "physdiff_quality", "schedule": "schedule_study",
-             "morph": "results/morph.md", "dynamic": "projection_dynamic"}
+             "morph": "results/morph.md", "dynamic": "projection_dynamic",
+             "new prompts": "new_prompts_default"}
     marker = files[source]
     return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
 
