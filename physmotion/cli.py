@@ -74,6 +74,8 @@ def data_build(
     mirror: bool = typer.Option(True, help="Add left/right mirrored copies, as HumanML3D does."),
     jobs: int = typer.Option(0, help="Worker processes (0: one per core)."),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
+    activations: bool = typer.Option(False, "--activations", help="Also cache muscle-activation stand-ins "
+                                     "(inverse-dynamics joint effort, 8 channels) in activations/."),
 ) -> None:
     """Import every clip of a mocap collection into a HumanML3D-layout dataset."""
     from physmotion.data.build import BuildConfig, build_dataset
@@ -91,6 +93,20 @@ def data_build(
         f"items: {items}",
         highlight=False,
     )
+    if activations:
+        data_activations(out, jobs)
+
+
+@data_app.command("activations")
+def data_activations(
+    root: Path = typer.Argument(..., help="A folder written by `physmotion data build`."),
+    jobs: int = typer.Option(0, help="Worker processes (0: one per core)."),
+) -> None:
+    """Cache muscle-activation stand-ins (T, 8) per motion in ROOT/activations (replaces an earlier cache)."""
+    from physmotion.data.build import build_activations
+
+    n = build_activations(root, progress=sys.stderr.isatty(), jobs=jobs)
+    console.print(f"activations for {n} motions in {root / 'activations'}", highlight=False)
 
 
 @data_app.command("stats")

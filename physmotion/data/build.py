@@ -9,6 +9,7 @@ Layout written (HumanML3D's, plus two files of ours)::
     Mean.npy Std.npy          feature statistics of the train split (HumanML3D's cal_mean_variance)
     index.csv                 id, clip, take, source, licence_tag, window start/end frames, mirrored
     build_info.json           source, options, counts, skipped clips with reasons
+    activations/<id>.npy      (T, 8) float32 muscle-activation stand-ins, optional (:func:`build_activations`)
 
 Differences from HumanML3D, on purpose: ``new_joints`` holds the processed joints that went into the
 features rather than joints recovered from them, so the round trip features -> joints can be checked;
@@ -35,10 +36,14 @@ from physmotion.errors import PhysmotionError
 from physmotion.features.humanml3d import extract_features
 from physmotion.features.normalize import compute_mean_std
 from physmotion.io.importer import ClipInfo, import_clip, load_manifest
+from physmotion.physics.activations import ACTIVATION_CHANNELS, activations
+from physmotion.physics.workers import map_in_workers, worker_count
 from physmotion.skeleton import mirror_joints
 
 SPLITS = ("train", "val", "test")
 BUILD_INFO = "build_info.json"
+ACTIVATIONS = "activations"
+_MISSING_ACTIVATIONS = "run `physmotion data build --activations` (or `physmotion data activations DIR`)"
 
 
 @dataclass(frozen=True)
@@ -260,3 +265,74 @@ def _replace_dir(new: Path, out: Path) -> None:
         shutil.rmtree(trash, ignore_errors=True)
     else:
         os.replace(new, out)
+
+
+# ----------------------------------------------------------------------------------------------
+# Activation cache (physics/activations.py): one (T, 8) array per item, next to new_joints/.
+
+
+def build_activations(root: str | Path, progress: bool = True, jobs: int = 0) -> int:
+    """Write ``activations/<id>.npy`` (T, 8) float32 for every item in ``root/new_joints``.
+
+    The folder appears whole or not at all (written next to it and renamed into place; an earlier
+    cache is replaced), and build_info.json records it. Deterministic: the same joints give
+    byte-identical files. jobs: worker processes, 0 = one per core. Returns the number of items.
+    """
+    from rich.progress import Progress
+
+    root = Path(root)
+    if not (root / BUILD_INFO).is_file() or not (root / "new_joints").is_dir():
+        raise PhysmotionError(f"{root} is not a physmotion dataset build (no {BUILD_INFO} or new_joints/)")
+    paths = sorted((root / "new_joints").glob("*.npy"))
+    if not paths:
+        raise PhysmotionError(f"{root}/new_joints holds no motions")
+    # Chunks of a few items per worker: the bar moves while the pool stays busy.
+    chunk = 4 * worker_count(jobs, len(paths))
+    tmp = Path(tempfile.mkdtemp(dir=root, prefix=f".{ACTIVATIONS}."))
+    try:
+        with Progress(disable=not progress, transient=True) as bar:
+            task = bar.add_task("activations", total=len(paths))
+            for k in range(0, len(paths), chunk):
+                part = paths[k : k + chunk]
+                for path, act in zip(part, map_in_workers(_activations_of, part, jobs)):
+                    np.save(tmp / path.name, act)
+                bar.advance(task, len(part))
+        _replace_dir(tmp, root / ACTIVATIONS)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    info = json.loads((root / BUILD_INFO).read_text())
+    info[ACTIVATIONS] = {
+        "channels": list(ACTIVATION_CHANNELS),
+        "source": "inverse dynamics of the physmotion humanoid",
+        "fps": FPS,
+        "items": len(paths),
+    }
+    _write_atomic(root / BUILD_INFO, json.dumps(info, indent=2, sort_keys=True) + "\n")
+    return len(paths)
+
+
+def load_activations(root: str | Path, id: str) -> np.ndarray:
+    """The cached activations (T, 8) float32 of item ``id``, channels :data:`ACTIVATION_CHANNELS`."""
+    folder = Path(root) / ACTIVATIONS
+    if not folder.is_dir():
+        raise PhysmotionError(f"{root} has no activation cache; {_MISSING_ACTIVATIONS}")
+    path = folder / f"{id}.npy"
+    if not path.is_file():
+        raise PhysmotionError(f"{root}: no cached activations for '{id}'; {_MISSING_ACTIVATIONS}")
+    return np.load(path)
+
+
+def _activations_of(path: Path) -> np.ndarray:
+    return activations(np.load(path), float(FPS))
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise

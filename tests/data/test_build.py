@@ -1,5 +1,8 @@
 import csv
 import json
+import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -7,11 +10,21 @@ import pytest
 import torch
 
 from physmotion.conventions import MAX_FRAMES, MIN_FRAMES
-from physmotion.data.build import SPLITS, BuildConfig, build_dataset, mirror_text, split_of, windows
+from physmotion.data.build import (
+    SPLITS,
+    BuildConfig,
+    build_activations,
+    build_dataset,
+    load_activations,
+    mirror_text,
+    split_of,
+    windows,
+)
 from physmotion.data.stats import dataset_stats
-from physmotion.errors import PhysmotionError
+from physmotion.errors import PhysmotionError, ShapeError
 from physmotion.features.humanml3d import FEATURE_DIM, recover_from_ric
 from physmotion.io.importer import load_manifest
+from physmotion.physics.activations import ACTIVATION_CHANNELS, activations
 
 pytestmark = pytest.mark.slow
 
@@ -124,3 +137,99 @@ def test_split_assignment_is_stable_and_salted() -> None:
     assert a != [split_of(t, BuildConfig(seed=1)) for t in takes]
     share = a.count("train") / len(a)
     assert 0.7 < share < 0.9
+
+
+# --- activation cache, on a build of a few clips ---
+
+_FEW_CLIPS = ("bandai2_dataset-2_walk_normal_001", "bandai2_dataset-2_run_normal_001", "bandai1_dataset-1_bow_active_001")
+
+
+def _few_clips_manifest(mocap_dir: Path, out: Path) -> Path:
+    """A mocap folder whose manifest lists only _FEW_CLIPS (paths made absolute)."""
+    out.mkdir(parents=True)
+    with open(mocap_dir / "manifest.csv", newline="") as f:
+        reader = csv.DictReader(f)
+        rows = [r for r in reader if r["clip"] in _FEW_CLIPS]
+        fields = reader.fieldnames
+    for r in rows:
+        r["path"] = str(mocap_dir / r["path"])
+    with open(out / "manifest.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=fields)
+        w.writeheader()
+        w.writerows(rows)
+    return out
+
+
+@pytest.fixture(scope="module")
+def few_clips(mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return _few_clips_manifest(mocap_dir, tmp_path_factory.mktemp("few") / "mocap")
+
+
+@pytest.fixture(scope="module")
+def small_build(few_clips: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A build of _FEW_CLIPS (mirrored copies included) with its activation cache, in 2 workers."""
+    out = build_dataset(few_clips, tmp_path_factory.mktemp("small") / "data", BuildConfig(jobs=1),
+                        progress=False).out  # fmt: skip
+    assert build_activations(out, progress=False, jobs=2) == len(list((out / "new_joints").iterdir()))
+    return out
+
+
+def test_activation_cache_matches_a_fresh_computation(small_build: Path) -> None:
+    ids = sorted(p.stem for p in (small_build / "new_joints").glob("*.npy"))
+    assert len(ids) >= 6 and sorted(p.stem for p in (small_build / "activations").glob("*.npy")) == ids
+    for i in ids:
+        act = load_activations(small_build, i)
+        joints = np.load(small_build / "new_joints" / f"{i}.npy")
+        assert act.shape == (len(joints), len(ACTIVATION_CHANNELS)) and act.dtype == np.float32
+        assert np.all(np.isfinite(act)) and act.min() >= 0 and act.max() <= 1
+    for i in (ids[0], ids[-1]):  # a mirrored and a plain item
+        fresh = activations(np.load(small_build / "new_joints" / f"{i}.npy"))
+        assert load_activations(small_build, i).tobytes() == fresh.tobytes()
+    info = json.loads((small_build / "build_info.json").read_text())
+    assert info["activations"]["channels"] == list(ACTIVATION_CHANNELS)
+    assert info["activations"]["items"] == len(ids) and info["items"]  # the build's own record is kept
+    assert not [p for p in small_build.iterdir() if p.name.startswith(".")]  # no temporary left
+
+
+def test_activation_cache_is_deterministic(small_build: Path, tmp_path: Path) -> None:
+    again = tmp_path / "again"
+    shutil.copytree(small_build, again)
+    shutil.rmtree(again / "activations")
+    build_activations(again, progress=False, jobs=1)  # in this process, where small_build used workers
+    for path in sorted((small_build / "activations").glob("*.npy")):
+        assert (again / "activations" / path.name).read_bytes() == path.read_bytes()
+
+
+def test_a_failed_activation_build_leaves_the_old_cache(small_build: Path, tmp_path: Path) -> None:
+    broken = tmp_path / "broken"
+    shutil.copytree(small_build, broken)
+    before = {p.name: p.read_bytes() for p in (broken / "activations").iterdir()}
+    victim = max((broken / "new_joints").iterdir())
+    np.save(victim, np.zeros((2, 22, 3), dtype=np.float32))  # too short for accelerations
+    with pytest.raises(ShapeError, match="at least 3 frames"):
+        build_activations(broken, progress=False, jobs=1)
+    assert {p.name: p.read_bytes() for p in (broken / "activations").iterdir()} == before
+    assert not [p for p in broken.iterdir() if p.name.startswith(".")]
+
+
+def test_missing_activation_cache_is_a_one_line_error(small_build: Path, tmp_path: Path) -> None:
+    bare = tmp_path / "bare"
+    shutil.copytree(small_build, bare, ignore=shutil.ignore_patterns("activations"))
+    with pytest.raises(PhysmotionError, match="physmotion data build --activations") as err:
+        load_activations(bare, "anything")
+    assert "\n" not in str(err.value)
+    with pytest.raises(PhysmotionError, match="no cached activations for 'nope'"):
+        load_activations(small_build, "nope")
+    with pytest.raises(PhysmotionError, match="not a physmotion dataset build"):
+        build_activations(tmp_path / "nothing", progress=False)
+
+
+def test_cli_build_with_activations(few_clips: Path, small_build: Path, tmp_path: Path) -> None:
+    out = tmp_path / "cli"
+    res = subprocess.run([sys.executable, "-m", "physmotion.cli", "data", "build", "--source", str(few_clips),
+                          "-o", str(out), "--jobs", "1", "--activations"],
+                         capture_output=True, text=True, timeout=600, check=False)  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    assert "activations for" in res.stdout
+    for path in (small_build / "activations").glob("*.npy"):  # the same as the library's cache
+        assert (out / "activations" / path.name).read_bytes() == path.read_bytes()
