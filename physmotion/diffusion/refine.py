@@ -1,0 +1,181 @@
+"""Inversion refinement: DDIM-invert a motion part of the way into the diffusion, then denoise it back.
+
+BioMoDiffuse Sec. 3.5, Eq. 10-11: a motion x_0 (e.g. a pose estimator's jittery output) is mapped by
+deterministic DDIM inversion to x_t at t = strength * T, and the deterministic DDIM sampler (eta 0, with
+classifier-free guidance) brings it back to a refined x_0. The paper also steers this denoising with its
+physics network's gradients; that network does not exist here yet, so :func:`refine` is the inversion
+part only.
+
+The schedules mirror :func:`physmotion.diffusion.schedule.sampling_scheduler`'s ``ddim`` (cosine betas,
+x0 prediction, trailing spacing, alpha 1 at the end): inversion runs on diffusers' ``DDIMInverseScheduler``
+with the same settings, so both directions visit the same timesteps (19, 39, ... for 50 steps).
+
+Conventions: the model works on 20 fps features; input at another rate is resampled by linear
+interpolation of the joints in time. The features re-target the motion onto the dataset's uniform
+skeleton and canonicalise it (floor, origin, facing +Z); the refined joints are put back into the
+input's frame by the yaw + translation that best maps the canonical input onto the input.
+Motions longer than the model's ``max_frames`` (196 frames, 9.8 s at 20 fps) are refused.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import pairwise
+
+import numpy as np
+import torch
+
+from physmotion.conventions import FPS, MIN_FRAMES
+from physmotion.diffusion.model import MotionDiffusion
+from physmotion.diffusion.physdiff import joints_to_features
+from physmotion.diffusion.schedule import DiffusionConfig, sampling_scheduler
+from physmotion.errors import PhysmotionError, ShapeError
+from physmotion.features.humanml3d import extract_features, recover_from_ric
+from physmotion.text.encoder import load_text_encoder
+
+
+@dataclass
+class RefineConfig:
+    """strength: share of the DDIM steps inverted, in (0, 1]; steps: DDIM steps of the full schedule;
+    cfg_scale: guidance of the denoising half; text: caption to condition on ("" = unconditional)."""
+
+    strength: float = 0.3
+    steps: int = 50
+    cfg_scale: float = 2.5
+    text: str = ""
+
+    def check(self) -> None:
+        if not (np.isfinite(self.strength) and 0.0 < self.strength <= 1.0):
+            raise PhysmotionError(f"strength must be in (0, 1], got {self.strength:g}")
+        if not 1 <= self.steps <= 1000:
+            raise PhysmotionError(f"steps must be between 1 and 1000, got {self.steps}")
+        if not np.isfinite(self.cfg_scale):
+            raise PhysmotionError(f"cfg_scale must be a finite number, got {self.cfg_scale}")
+
+    @property
+    def inverted_steps(self) -> int:
+        """Steps inverted and denoised again: round(strength * steps), at least 1."""
+        return max(1, round(self.strength * self.steps))
+
+
+def check_motion(joints: np.ndarray, fps: float, model: MotionDiffusion) -> np.ndarray:
+    """Validate a motion for :func:`refine`; returns its joints (T', 22, 3) float64 at the model's 20 fps."""
+    joints = np.asarray(joints)
+    if joints.ndim != 3 or joints.shape[1:] != (22, 3):
+        raise ShapeError(f"joints must be (T, 22, 3), got {joints.shape}")
+    if not np.isfinite(joints).all():
+        raise ShapeError("the motion has NaN or infinite joint positions")
+    if not (np.isfinite(fps) and fps > 0):
+        raise ShapeError(f"fps must be positive, got {fps}")
+    out = _resample(joints.astype(np.float64), float(fps), FPS)
+    hi = model.denoiser.max_frames
+    if not MIN_FRAMES <= len(out) <= hi:
+        raise ShapeError(f"the motion has {len(out)} frames at {FPS} fps; refine takes {MIN_FRAMES}..{hi} "
+                         f"({MIN_FRAMES / FPS:g}..{hi / FPS:g} s)")  # fmt: skip
+    return out
+
+
+@torch.no_grad()
+def refine(model: MotionDiffusion, joints: np.ndarray, fps: float, config: RefineConfig | None = None) -> np.ndarray:
+    """Refine a motion by DDIM inversion to ``strength`` and deterministic DDIM denoising back.
+
+    joints: (T, 22, 3) metres, Y up, at ``fps``. Returns (T', 22, 3) float32 at 20 fps (T' = T for 20 fps
+    input), in the input's frame, on the dataset's uniform skeleton. Deterministic.
+    Raises PhysmotionError / ShapeError (one line) for NaN, a wrong shape, a length outside
+    MIN_FRAMES..max_frames at 20 fps, or a strength outside (0, 1].
+    """
+    cfg = config or RefineConfig()
+    cfg.check()
+    pos = check_motion(joints, fps, model)
+    dim = model.denoiser.feature_dim
+    _, canonical = extract_features(pos)
+    feats = joints_to_features(pos, dim)  # T rows: the last one extrapolated (physdiff's convention)
+    device = next(model.net.parameters()).device
+    x = torch.from_numpy(model.normalizer.normalize(feats)).float()[None].to(device)
+    guide = _Guide(model, cfg.text, device, len(pos))
+    k = cfg.inverted_steps
+    x = _invert(x, guide, k, cfg.steps, model.diffusion)
+    x = _denoise(x, guide, k, cfg.steps, cfg.cfg_scale, model.diffusion)
+    out = recover_from_ric(model.normalizer.denormalize(x[0].float().cpu().numpy()).astype(np.float64))
+    rot, shift = _yaw_fit(canonical.astype(np.float64), pos)
+    return (out @ rot.T + shift).astype(np.float32)
+
+
+class _Guide:
+    """The model's x0 prediction for one motion, guided: uncond + s (cond - uncond); uncond only for ""."""
+
+    def __init__(self, model: MotionDiffusion, text: str, device: torch.device, frames: int) -> None:
+        self.model, self.text = model, text.strip()
+        # with no caption every pass drops the text (the null condition); any caption fills the slot
+        self.enc = load_text_encoder(model.text_encoder).encode([self.text or "a person"]).to(device)
+        self.mask = torch.ones(1, frames, dtype=torch.bool, device=device)
+        self.device = device
+
+    def __call__(self, x: torch.Tensor, t: int, scale: float) -> torch.Tensor:
+        tt = torch.full((1,), int(t), device=self.device)
+        drop_all = torch.ones(1, dtype=torch.bool, device=self.device)
+        uncond = self.model.net(x, tt, self.enc, self.mask, drop_all)
+        if not self.text or scale == 0.0:
+            return uncond
+        cond = self.model.net(x, tt, self.enc, self.mask, ~drop_all)
+        return uncond + scale * (cond - uncond)
+
+
+def _inverse_scheduler(steps: int, diffusion: DiffusionConfig):
+    """diffusers' DDIMInverseScheduler with the settings of schedule.sampling_scheduler's ``ddim``."""
+    from diffusers import DDIMInverseScheduler
+
+    sched = DDIMInverseScheduler(num_train_timesteps=diffusion.num_train_timesteps,
+                                 beta_schedule=diffusion.beta_schedule, prediction_type="sample",
+                                 clip_sample=False, set_alpha_to_one=True, timestep_spacing="trailing")  # fmt: skip
+    sched.set_timesteps(steps)
+    return sched
+
+
+def _invert(x: torch.Tensor, guide: _Guide, k: int, steps: int, diffusion: DiffusionConfig) -> torch.Tensor:
+    """x_0 (1, T, D) normalised -> x at the k-th timestep of the schedule (deterministic DDIM inversion).
+
+    Each step x_t -> x_t' reads the model's x0 at the current level t, as Eq. 10 writes it (diffusers'
+    pipelines read it at t' instead). The first step starts at alpha = 1, where an x0-predicting model's
+    noise (x - sqrt(a) x0) / sqrt(1 - a) is 0/0 and the library would divide by zero: there the input is
+    its own x0 and the noise is taken as 0, i.e. x_t1 = sqrt(a_t1) x_0.
+    """
+    sched = _inverse_scheduler(steps, diffusion)
+    ts = [int(t) for t in sched.timesteps[:k]]
+    x = sched.alphas_cumprod[ts[0]].sqrt().to(x) * x
+    for prev, t in pairwise(ts):
+        x0 = guide(x, prev, 1.0)  # inversion with the plain (conditional or unconditional) prediction
+        x = sched.step(x0, t, x).prev_sample
+    return x
+
+
+def _denoise(x: torch.Tensor, guide: _Guide, k: int, steps: int, scale: float, diffusion: DiffusionConfig) -> torch.Tensor:
+    """x at the k-th timestep -> x_0 by the last k steps of deterministic DDIM (eta 0), guided (Eq. 11)."""
+    sched = sampling_scheduler("ddim", steps, diffusion)
+    for t in sched.timesteps[len(sched.timesteps) - k :]:
+        x0 = guide(x, int(t), scale)
+        x = sched.step(x0, t, x, eta=0.0).prev_sample
+    return x
+
+
+def _resample(joints: np.ndarray, fps: float, target: float) -> np.ndarray:
+    """(T, 22, 3) at fps -> (T', 22, 3) at target, linear in time over the same duration."""
+    if abs(fps - target) < 1e-9:
+        return joints
+    src = np.arange(len(joints)) / fps
+    dst = np.arange(int(np.floor(src[-1] * target + 1e-9)) + 1) / target
+    flat = joints.reshape(len(joints), -1)
+    out = np.stack([np.interp(dst, src, flat[:, c]) for c in range(flat.shape[1])], axis=1)
+    return out.reshape(len(dst), 22, 3)
+
+
+def _yaw_fit(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation about Y (3, 3) and shift (3,) minimising sum |R src + s - dst|^2 over frames and joints."""
+    a = src.reshape(-1, 3) - src.reshape(-1, 3).mean(0)
+    b = dst.reshape(-1, 3) - dst.reshape(-1, 3).mean(0)
+    # R = [[c, 0, s], [0, 1, 0], [-s, 0, c]]: maximise c * sum(ax bx + az bz) + s * sum(az bx - ax bz)
+    theta = np.arctan2(np.sum(a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]), np.sum(a[:, 0] * b[:, 0] + a[:, 2] * b[:, 2]))
+    c, s = np.cos(theta), np.sin(theta)
+    rot = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    shift = dst.reshape(-1, 3).mean(0) - src.reshape(-1, 3).mean(0) @ rot.T
+    return rot, shift
