@@ -117,14 +117,6 @@ METRICS: dict[str, MetricInfo] = {
         MetricInfo("skate", "mm", "PhysDiff", "frames", 1, "lower",
                    "horizontal displacement of foot joints in contact in two adjacent frames"),
         MetricInfo("phys_err", "mm", "PhysDiff", "sum", 0, "lower", "Penetrate + Float + Skate"),
-        # Recorded by P in its output (Motion.residual), not measured from the joints: how much of the
-        # motion the non-physical root wrench carried (PhysDiff's residual force control).
-        MetricInfo("residual_force", "x W", "PhysDiff (RFC)", "frames", 0, "lower",
-                   "mean root residual force the projection applied, in body weights (recorded by P)"),
-        MetricInfo("residual_force_p95", "x W", "PhysDiff (RFC)", "frames", 0, "lower",
-                   "95th percentile over frames of the root residual force (recorded by P)"),
-        MetricInfo("residual_torque", "x W m", "PhysDiff (RFC)", "frames", 0, "lower",
-                   "mean root residual torque the projection applied, in body weight x 1 m (recorded by P)"),
         MetricInfo("pfc", "score", "EDGE/Morph", "motions", 2, "lower",
                    "physical foot contact x 1e4: min foot step left x right x normalised root acceleration"),
         MetricInfo("skate_ratio", "ratio", "BioMoDiffuse (GMD)", "motions", 1, "closer to real",
@@ -370,6 +362,22 @@ _PER_MOTION: dict[str, Callable[[_Batch], np.ndarray]] = {
     "vc": lambda b: _spectral_ratio(b, 1),
     "ac": lambda b: _spectral_ratio(b, 2),
 }
+
+RECORDED: dict[str, MetricInfo] = {
+    m.name: m
+    for m in (
+        # Recorded by P in its output (Motion.residual), not measured from the joints: how much of the
+        # motion the non-physical root wrench carried (PhysDiff's residual force control).
+        MetricInfo("residual_force", "x W", "PhysDiff (RFC)", "frames", 0, "lower",
+                   "mean root residual force the projection applied, in body weights"),
+        MetricInfo("residual_force_p95", "x W", "PhysDiff (RFC)", "frames", 0, "lower",
+                   "95th percentile over frames of the root residual force"),
+        MetricInfo("residual_torque", "x W m", "PhysDiff (RFC)", "frames", 0, "lower",
+                   "mean root residual torque the projection applied, in body weight x 1 m"),
+    )
+}
+"""Values a projected motion file records (``Motion.residual``) rather than metrics of its joints; the
+metrics tables show them after :data:`METRICS`."""
 
 
 def _aggregate(name: str, values: np.ndarray, lengths: np.ndarray) -> float:
@@ -628,10 +636,11 @@ def format_table(results: Mapping[str, Mapping[str, float]], title: str | None =
         table.add_column(col, justify=justify)  # type: ignore[arg-type]
     for name in results:
         table.add_column(str(name), justify="right")
-    present = [m for m in METRICS if any(m in r for r in results.values())]
-    present += sorted({k for r in results.values() for k in r} - set(METRICS))
+    known = METRICS | RECORDED
+    present = [m for m in known if any(m in r for r in results.values())]
+    present += sorted({k for r in results.values() for k in r} - set(known))
     for name in present:
-        info = METRICS.get(name)
+        info = known.get(name)
         cells = [f"{r[name]:.3f}" if name in r else "-" for r in results.values()]
         table.add_row(name, info.unit if info else "", info.paper if info else "", *cells)
     return table

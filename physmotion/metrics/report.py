@@ -15,7 +15,7 @@ from rich.console import Console
 from rich.table import Table
 
 from physmotion.errors import PhysmotionError
-from physmotion.metrics.physical import METRICS, format_table
+from physmotion.metrics.physical import METRICS, RECORDED, format_table
 
 
 def path_labels(paths: Sequence[str | Path]) -> list[str]:
@@ -77,14 +77,16 @@ def to_json(results: Mapping[str, Mapping[str, float]], paths: Sequence[str | Pa
     """``{"surface", "units", "files": [{"label", "path", "metrics"}]}`` as indented JSON."""
     files = [{"label": label, "path": str(path), "metrics": dict(r)}
              for (label, r), path in zip(results.items(), paths)]  # fmt: skip
-    units = {name: METRICS[name].unit for name in METRICS if any(name in r for r in results.values())}
+    known = METRICS | RECORDED
+    units = {name: known[name].unit for name in known if any(name in r for r in results.values())}
     return json.dumps({"surface": surface, "units": units, "files": files}, indent=2) + "\n"
 
 
 def to_csv(results: Mapping[str, Mapping[str, float]], paths: Sequence[str | Path]) -> str:
     """One row per file: ``label, path`` and one column per metric (its name, units in the JSON)."""
-    names = [m for m in METRICS if any(m in r for r in results.values())]
-    names += sorted({k for r in results.values() for k in r} - set(METRICS))
+    known = METRICS | RECORDED
+    names = [m for m in known if any(m in r for r in results.values())]
+    names += sorted({k for r in results.values() for k in r} - set(known))
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(["label", "path", *names])

@@ -10,8 +10,10 @@ The model-based tracker needs no training. At each control step (30 Hz by defaul
   floor in the reference. ``mj_inverse`` with contacts on is useless here: the soft contact model
   turns small reference penetrations into huge forces, and a feed-forward built on them pushes the
   body up (docs/decisions.md: "inverse dynamics without contacts, foot forces split out");
-- a residual root wrench (RFC, PhysDiff's action space): what the feet could not explain, plus a PD
-  pull of the pelvis toward the reference, clipped to ``residual_force`` x body weight and
+- a root wrench: what the feet could not explain in the reference, plus a PD pull of the pelvis toward
+  the reference. With ``feet_balance`` the feet that touch the floor in the simulation carry what they
+  can of it (contact forces in the friction pyramid, made by the legs' joint torques); the rest is the
+  residual (RFC, PhysDiff's action space), clipped to ``residual_force`` x body weight and
   ``residual_torque`` x body weight x 1 m. Kept small so that the body cannot float or sink.
 
 All reference terms depend only on the reference, so :func:`prepare_reference` computes them once for
@@ -146,8 +148,9 @@ class Controller(Protocol):
         ...
 
     def residual(self, data, ref: Reference, step: int, substeps: int) -> np.ndarray:
-        """Root wrench (6,) for simulation step ``step`` (counted from the start, ``substeps`` per control
-        step): the one that ends at control time step / substeps."""
+        """Generalised force (nv,) held over the simulation steps that end at ``step`` (counted from the
+        start, ``substeps`` per control step, so at control time step / substeps): the root residual
+        wrench in rows 0..5, any joint torques the controller adds for it in the rest."""
         ...
 
 
@@ -249,7 +252,6 @@ class ModelBasedTracker:
         self._is_foot = np.zeros(model.nbody, dtype=bool)
         self._is_foot[feet] = True
         self._pyr = _pyramid(self.config.friction)
-        self._jac = np.zeros((3, model.nv))
 
     def act(self, data, ref: Reference, k: int) -> tuple[np.ndarray, np.ndarray]:
         """Actuator targets for the control step k -> k+1 (ctrl (nu,); qfrc (nv,) is zero here).
@@ -263,8 +265,9 @@ class ModelBasedTracker:
         return ctrl, np.zeros(self.model.nv)
 
     def residual(self, data, ref: Reference, step: int, substeps: int) -> np.ndarray:
-        """Root wrench (6,) for simulation step ``step`` (ending at control time step / substeps), in
-        MuJoCo's free-joint convention (world force, local torque), clipped to the configured bounds.
+        """Generalised force (nv,) for simulation step ``step`` (ending at control time step / substeps):
+        rows 0..5 the residual root wrench in MuJoCo's free-joint convention (world force, local torque),
+        clipped to the configured bounds; with ``feet_balance`` the legs' joint torques in the rest.
 
         This runs at every simulation step, in Python, so the reference side is precomputed
         (:meth:`Reference.root_targets`) and the torque is worked out in the pelvis frame, where the
