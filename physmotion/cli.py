@@ -76,13 +76,16 @@ def data_build(
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
     activations: bool = typer.Option(False, "--activations", help="Also cache muscle-activation stand-ins "
                                      "(inverse-dynamics joint effort, 8 channels) in activations/."),
+    features: int = typer.Option(263, help="263 (HumanML3D) or 329 (BioMoDiffuse: + joint accelerations; "
+                                 "what `train denoiser --arch biomo` needs, with --activations)."),
 ) -> None:
     """Import every clip of a mocap collection into a HumanML3D-layout dataset."""
     from physmotion.data.build import BuildConfig, build_dataset
     from physmotion.paths import check_output
 
     check_output(out, "folder", overwrite=overwrite)
-    config = BuildConfig(exclude_licences=tuple(exclude_license), seed=seed, mirror=mirror, jobs=jobs)
+    config = BuildConfig(exclude_licences=tuple(exclude_license), seed=seed, mirror=mirror, jobs=jobs,
+                         features=features)
     report = build_dataset(source, out, config, progress=sys.stderr.isatty())
     for clip, reason in sorted(report.skipped.items()):
         console.print(f"[yellow]skipped[/] {clip}: {reason}", highlight=False)
@@ -280,14 +283,17 @@ def refine_cmd(
     text: str = typer.Option("", help="Caption to condition on (default: none)."),
     model_dir: Path | None = typer.Option(None, "--model", help="Model folder (default: the shipped model)."),
     steps: int = typer.Option(50, help="DDIM steps of the full schedule."),
+    phys_scale: float | None = typer.Option(None, help="BioMoDiffuse models: physics guidance weight "
+                                            "(default: the model's sampler's; other models have none)."),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
-    """Refine a motion by DDIM inversion and denoising (BioMoDiffuse Sec. 3.5, without physics guidance)."""
+    """Refine a motion by DDIM inversion and denoising (BioMoDiffuse Sec. 3.5; physics guidance with a
+    BioMoDiffuse model)."""
     from physmotion.diffusion.model import MotionDiffusion
     from physmotion.diffusion.refine import RefineConfig, check_motion, refine
     from physmotion.motion import Motion
 
-    config = RefineConfig(strength=strength, steps=steps, text=text)
+    config = RefineConfig(strength=strength, steps=steps, text=text, phys_scale=phys_scale)
     config.check()
     if not path.is_file():
         raise PhysmotionError(f"{path}: no such file")
@@ -331,10 +337,15 @@ def generate_cmd(
         "inference) (default: physdiff:end:4,space:1)."),
     num: int | None = typer.Option(None, help="Samples per caption (default: 1)."),
     seed: int | None = typer.Option(None, help="Random seed; the same seed gives the same motions (default: 0)."),
-    sampler: str | None = typer.Option(None, help="ddim, ddpm or dpmpp (DPM-Solver++ 2M, Karras) (default: ddim)."),
-    steps: int | None = typer.Option(None, help="Sampling steps (default: 50)."),
+    sampler: str | None = typer.Option(None, help="ddim, ddpm, dpmpp (DPM-Solver++ 2M, Karras) or dpmpp-sde "
+                                       "(its SDE variant) (default: ddim; dpmpp-sde for a BioMoDiffuse model)."),
+    steps: int | None = typer.Option(None, help="Sampling steps (default: 50; 10 for a BioMoDiffuse model)."),
     eta: float | None = typer.Option(None, help="DDIM eta (default: 0)."),
     cfg_scale: float | None = typer.Option(None, help="Classifier-free guidance scale (default: 2.5)."),
+    phys_scale: float | None = typer.Option(None, help="BioMoDiffuse models: physics guidance weight, 0 = "
+                                            "without the physical network (default: the model's sampler's)."),
+    speed: float | None = typer.Option(None, help="BioMoDiffuse models: speed control signal, scales the "
+                                       "physical network's accelerations (default: 1)."),
     model: Path | None = typer.Option(None, help="Model folder; the shipped model if left out."),
     preview: bool = typer.Option(True, help="Write a GIF preview per motion."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace files of the same names instead of "
@@ -342,8 +353,9 @@ def generate_cmd(
 ) -> None:
     """Generate motions from text: .npz, .bvh and a GIF preview per sample.
 
-    Unset options take GenerateConfig's and SamplerConfig's defaults (the values the help quotes)."""
+    Unset options take GenerateConfig's and the model's sampler defaults (the values the help quotes)."""
     from physmotion.diffusion.model import DEFAULT_MODEL_DIR, MotionDiffusion
+    from physmotion.diffusion.samplers import default_sampler
     from physmotion.generate import (
         GenerateConfig,
         check_outputs,
@@ -356,9 +368,11 @@ def generate_cmd(
     )
 
     cfg = _with(GenerateConfig(), seconds=seconds, num=num, physics=physics, seed=seed)
-    cfg.sampler = _with(cfg.sampler, sampler=sampler, steps=steps, eta=eta, cfg_scale=cfg_scale)
     check_outputs(texts, out, cfg, overwrite)
     net = MotionDiffusion.load(model)
+    cfg.sampler = _with(default_sampler(net), sampler=sampler, steps=steps, eta=eta, cfg_scale=cfg_scale,
+                        phys_scale=phys_scale, speed=speed)  # fmt: skip
+    cfg.sampler.check_model(net)
     check_request(texts, cfg, net)
     for text, tokens in long_prompts(texts, net).items():
         _warn(f"{_quote(text)} is {tokens} tokens long; the text encoder reads only the first "
@@ -418,7 +432,8 @@ def train_denoiser_cmd(
     out: Path = typer.Option(..., "-o", "--out", help="Run folder: model, train_state.pt, loss.csv. Must be "
                              "new or empty, unless --resume continues the run in it."),
     arch: str | None = typer.Option(
-        None, help="transformer (MDM) or unet (BioMoDiffuse's 1D UNet) (default: transformer)."),
+        None, help="transformer (MDM), unet (BioMoDiffuse's 1D UNet) or biomo (the UNet with BioMoDiffuse's "
+        "physical network; needs `data build --features 329 --activations`) (default: transformer)."),
     d_model: int | None = typer.Option(None, help="Width (default: 256)."),
     layers: int | None = typer.Option(None, help="Transformer layers, or UNet levels (default: 4)."),
     heads: int | None = typer.Option(None, help="Attention heads (default: 4)."),
@@ -434,6 +449,13 @@ def train_denoiser_cmd(
     seed: int | None = typer.Option(None, help="Seed of data order, noise and initialisation (default: 0)."),
     checkpoint_minutes: float | None = typer.Option(
         None, help="Minutes between atomic checkpoints (default: 5.0)."),
+    accel_weight: float | None = typer.Option(None, help="329-d data: weight of L_accel, the output's joint "
+                                              "accelerations (default: 1)."),
+    phys_weight: float | None = typer.Option(None, help="biomo: weight of L_phys, the physical network's "
+                                             "accelerations (default: 1)."),
+    emg_weight: float | None = typer.Option(None, help="biomo: weight of its muscle-activation loss (default: 1)."),
+    phys_drop: float | None = typer.Option(None, help="biomo: probability P_c of dropping the physical "
+                                           "network, for physics guidance (default: 0.1)."),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in --out where it stopped."),
 ) -> None:
     """Train a text-to-motion denoiser (DDPM, x0 prediction, EMA, classifier-free text dropout).
@@ -449,7 +471,8 @@ def train_denoiser_cmd(
 
     den = _with(DenoiserConfig(), arch=arch, d_model=d_model, layers=layers, heads=heads)
     cfg = _with(TrainConfig(data=str(data), out=str(out), denoiser=den), crop=crop, batch_size=batch_size,
-                steps=steps, lr=lr, bf16=bf16, device=device, seed=seed, checkpoint_minutes=checkpoint_minutes)
+                steps=steps, lr=lr, bf16=bf16, device=device, seed=seed, checkpoint_minutes=checkpoint_minutes,
+                accel_weight=accel_weight, phys_weight=phys_weight, emg_weight=emg_weight, phys_drop=phys_drop)
     result = train_denoiser(cfg, resume=resume, progress=sys.stderr.isatty())
     last = f", last loss {result.losses[-1][1]:.4f}" if result.losses else ""
     console.print(f"trained to step {result.step} in {result.seconds / 60:.1f} min{last}; model in {out}",
@@ -494,7 +517,8 @@ def evaluate_cmd(
         "(default: none,none+floor,post:1,post:4,physdiff:end:4,space:1)."),
     repeats: int | None = typer.Option(
         None, help="Repeated generation runs (95% intervals over them) (default: 3)."),
-    steps: int | None = typer.Option(None, help="Sampling steps (DDIM) (default: 50)."),
+    steps: int | None = typer.Option(None, help="Sampling steps (default: the model's: 50 DDIM, or 10 "
+                                     "DPM-Solver++ SDE for a BioMoDiffuse model)."),
     seed: int | None = typer.Option(None, help="Random seed (default: 0)."),
     quick: bool = typer.Option(False, "--quick", help="Smoke run: 32 motions, 2 repeats, 10 steps."),
     out: Path = typer.Option(Path("results/evaluate"), "-o", "--out", help="Writes <out>.md and <out>.json."),
@@ -504,6 +528,7 @@ def evaluate_cmd(
 
     Unset options take EvaluateConfig's defaults (the values the help quotes)."""
     from physmotion.diffusion.model import MotionDiffusion
+    from physmotion.diffusion.samplers import default_sampler
     from physmotion.eval.evaluator import Evaluator
     from physmotion.eval.table import EvaluateConfig, evaluate
     from physmotion.physics_mode import parse_modes
@@ -513,8 +538,8 @@ def evaluate_cmd(
     modes = tuple(str(m) for m in parse_modes(physics)) if physics is not None else None
     cfg = _with(EvaluateConfig.quick() if quick else EvaluateConfig(), modes=modes, split=split, seed=seed,
                 repeats=None if quick else repeats)
-    cfg.base.sampler = _with(cfg.base.sampler, steps=None if quick else steps)
     net, judge = MotionDiffusion.load(model), Evaluator.load(evaluator)
+    cfg.base.sampler = _with(default_sampler(net), steps=cfg.base.sampler.steps if quick else steps)
     with _step_bar("evaluating") as tick:
         table = evaluate(net, judge, data, cfg, on_progress=tick)
     paths = table.write(out)

@@ -3,7 +3,7 @@
 Layout written (HumanML3D's, plus two files of ours)::
 
     new_joints/<id>.npy       (T, 22, 3) float32 canonical joints the features encode (T = feature frames)
-    new_joint_vecs/<id>.npy   (T, 263) float32 HumanML3D features
+    new_joint_vecs/<id>.npy   (T, 263) float32 HumanML3D features (or (T, 329), BioMoDiffuse's, when built so)
     texts/<id>.txt            one caption per line
     train.txt val.txt test.txt   ids, one per line
     Mean.npy Std.npy          feature statistics of the train split (HumanML3D's cal_mean_variance)
@@ -33,7 +33,8 @@ import numpy as np
 
 from physmotion.conventions import FPS, MAX_FRAMES, MIN_FRAMES
 from physmotion.errors import PhysmotionError
-from physmotion.features.humanml3d import extract_features
+from physmotion.features.biomech import FEATURE_DIM_BIOMECH, extract_features_329
+from physmotion.features.humanml3d import FEATURE_DIM, extract_features
 from physmotion.features.normalize import compute_mean_std
 from physmotion.io.importer import ClipInfo, import_clip, load_manifest
 from physmotion.physics.activations import ACTIVATION_CHANNELS, activations
@@ -61,6 +62,8 @@ class BuildConfig:
     min_frames: int = MIN_FRAMES
     jobs: int = 0
     """Worker processes; 0 means one per CPU core."""
+    features: int = FEATURE_DIM
+    """263 (HumanML3D) or 329 (BioMoDiffuse: + joint accelerations) dimensions in new_joint_vecs."""
 
 
 @dataclass
@@ -139,7 +142,7 @@ def _process_clip(info: ClipInfo, config: BuildConfig) -> list[_Item] | str:
         for mirrored in (False, True) if config.mirror else (False,):
             joints = motion.joints[s:e]
             joints = mirror_joints(joints) if mirrored else joints
-            feats, canon = extract_features(joints)
+            feats, canon = _extract(joints, config.features)
             texts = [mirror_text(t) for t in motion.texts] if mirrored else list(motion.texts)
             items.append(
                 _Item(
@@ -150,6 +153,11 @@ def _process_clip(info: ClipInfo, config: BuildConfig) -> list[_Item] | str:
                 )  # fmt: skip
             )
     return items
+
+
+def _extract(joints: np.ndarray, dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """(features (T-1, dim), canonical joints (T, 22, 3)) for dim 263 or 329."""
+    return extract_features_329(joints) if dim == FEATURE_DIM_BIOMECH else extract_features(joints)
 
 
 def build_dataset(
@@ -165,6 +173,8 @@ def build_dataset(
     Deterministic: the same source and config give byte-identical files.
     """
     config = config or BuildConfig()
+    if config.features not in (FEATURE_DIM, FEATURE_DIM_BIOMECH):
+        raise PhysmotionError(f"features must be {FEATURE_DIM} or {FEATURE_DIM_BIOMECH}, got {config.features}")
     out = Path(out)
     if out.exists() and not (out / BUILD_INFO).is_file():
         raise PhysmotionError(f"{out} exists and is not a physmotion dataset build; choose another --out")

@@ -33,6 +33,7 @@ class MotionItem:
     id: str
     features: np.ndarray  # (T, D) float32
     captions: list[str]
+    activations: np.ndarray | None = None  # (T, 8) float32, when loaded (BioMoDiffuse's muscle term)
 
 
 def read_captions(path: Path) -> list[tuple[str, float, float]]:
@@ -61,9 +62,17 @@ def read_split(root: str | Path, split: str) -> list[str]:
 
 
 def load_items(
-    root: str | Path, split: str, min_frames: int = MIN_FRAMES, max_frames: int = MAX_FRAMES
+    root: str | Path,
+    split: str,
+    min_frames: int = MIN_FRAMES,
+    max_frames: int = MAX_FRAMES,
+    activations: bool = False,
 ) -> list[MotionItem]:
-    """Every usable (motion, captions) entry of a split, with HumanML3D's length filter."""
+    """Every usable (motion, captions) entry of a split, with HumanML3D's length filter.
+
+    activations: also load each motion's cached muscle activations (``data build --activations``)."""
+    from physmotion.data.build import load_activations
+
     root = Path(root)
     limit = max_frames + 4  # HumanML3D keeps motions of fewer than 200 frames for max length 196
     items: list[MotionItem] = []
@@ -72,16 +81,21 @@ def load_items(
         if not vec_path.is_file() or not text_path.is_file():
             continue  # HumanML3D's split files name a few ids with no files; it skips them too
         feats = np.load(vec_path).astype(np.float32)
+        acts = load_activations(root, mid) if activations else None
+        if acts is not None and len(acts) != len(feats):
+            raise PhysmotionError(f"{root}: activations of '{mid}' have {len(acts)} frames, its features "
+                                  f"{len(feats)}; rebuild them with `physmotion data activations {root}`")
         whole: list[str] = []
         for k, (caption, start, end) in enumerate(read_captions(text_path)):
             if start == 0.0 and end == 0.0:
                 whole.append(caption)
                 continue
-            part = feats[int(start * FPS) : int(end * FPS)]
+            span = slice(int(start * FPS), int(end * FPS))
+            part = feats[span]
             if min_frames <= len(part) < limit:
-                items.append(MotionItem(f"{mid}#{k}", part, [caption]))
+                items.append(MotionItem(f"{mid}#{k}", part, [caption], None if acts is None else acts[span]))
         if whole and min_frames <= len(feats) < limit:
-            items.append(MotionItem(mid, feats, whole))
+            items.append(MotionItem(mid, feats, whole, acts))
     return items
 
 
@@ -89,7 +103,8 @@ class MotionDataset(Dataset):
     """Text-motion pairs from a HumanML3D-layout folder.
 
     Each item is a dict: ``motion`` (T, D) float32 tensor (normalised with the folder's Mean/Std
-    unless ``normalize=False``), ``length`` int, ``text`` str, ``id`` str.
+    unless ``normalize=False``), ``length`` int, ``text`` str, ``id`` str, and with ``activations=True``
+    ``activations`` (T, 8) float32 tensor of the same window.
     """
 
     def __init__(
@@ -104,11 +119,12 @@ class MotionDataset(Dataset):
         normalize: bool = True,
         seed: int = 0,
         crop: int | None = None,
+        activations: bool = False,
     ) -> None:
         self.root = Path(root)
         if not self.root.is_dir():
             raise PhysmotionError(f"{root}: no such dataset folder")
-        self.items = load_items(self.root, split, min_frames, max_frames)
+        self.items = load_items(self.root, split, min_frames, max_frames, activations)
         if not self.items:
             raise PhysmotionError(f"{root}: split '{split}' has no usable motion")
         self.normalizer = Normalizer.load(self.root) if normalize else None
@@ -142,15 +158,18 @@ class MotionDataset(Dataset):
         motion = feats[start : start + length]
         if self.normalizer is not None:
             motion = self.normalizer.normalize(motion)
-        return {"motion": torch.from_numpy(np.ascontiguousarray(motion, dtype=np.float32)),
-                "length": length, "text": text, "id": item.id}  # fmt: skip
+        out = {"motion": torch.from_numpy(np.ascontiguousarray(motion, dtype=np.float32)),
+               "length": length, "text": text, "id": item.id}  # fmt: skip
+        if item.activations is not None:
+            out["activations"] = torch.from_numpy(np.ascontiguousarray(item.activations[start : start + length]))
+        return out
 
 
 def collate(batch: list[dict]) -> dict:
     """Pad a list of items to the longest one.
 
     Returns motion (B, T, D) zero-padded, mask (B, T) bool (True on real frames), lengths (B,),
-    text list[str], id list[str].
+    text list[str], id list[str], and activations (B, T, 8) zero-padded when the items have them.
     """
     lengths = torch.tensor([b["length"] for b in batch])
     width = int(lengths.max())
@@ -158,5 +177,11 @@ def collate(batch: list[dict]) -> dict:
     for i, b in enumerate(batch):
         motion[i, : b["length"]] = b["motion"]
     mask = torch.arange(width)[None, :] < lengths[:, None]
-    return {"motion": motion, "mask": mask, "lengths": lengths,
-            "text": [b["text"] for b in batch], "id": [b["id"] for b in batch]}  # fmt: skip
+    out = {"motion": motion, "mask": mask, "lengths": lengths,
+           "text": [b["text"] for b in batch], "id": [b["id"] for b in batch]}  # fmt: skip
+    if all("activations" in b for b in batch):
+        acts = torch.zeros(len(batch), width, batch[0]["activations"].shape[-1])
+        for i, b in enumerate(batch):
+            acts[i, : b["length"]] = b["activations"]
+        out["activations"] = acts
+    return out

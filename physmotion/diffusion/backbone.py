@@ -22,7 +22,7 @@ from physmotion.text.encoder import MINILM_DIM, TextFeatures
 class DenoiserConfig:
     """Shape of a denoiser; stored in every checkpoint."""
 
-    arch: str = "transformer"  # "transformer" (MDM) or "unet" (BioMoDiffuse's 1D UNet)
+    arch: str = "transformer"  # "transformer" (MDM), "unet" (BioMoDiffuse's 1D UNet) or "biomo" (UNet + physics)
     feature_dim: int = FEATURE_DIM
     text_dim: int = MINILM_DIM
     d_model: int = 256
@@ -31,6 +31,7 @@ class DenoiserConfig:
     ff_mult: int = 4
     dropout: float = 0.1
     max_frames: int = MAX_FRAMES
+    phys_hidden: int = 128  # "biomo": width of the physical network (physmotion.diffusion.physnet)
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -79,4 +79,8 @@ def build_denoiser(config: DenoiserConfig) -> nn.Module:
         return TransformerDenoiser(config)
     if config.arch == "unet":
         return UNetDenoiser(config)
-    raise ValueError(f"unknown denoiser architecture {config.arch!r} (transformer or unet)")
+    if config.arch == "biomo":
+        from physmotion.diffusion.physnet import BioMoDenoiser
+
+        return BioMoDenoiser(config)
+    raise ValueError(f"unknown denoiser architecture {config.arch!r} (transformer, unet or biomo)")

@@ -28,6 +28,7 @@ import torch
 from physmotion.conventions import FPS, MIN_FRAMES
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.physdiff import joints_to_features
+from physmotion.diffusion.samplers import SamplerConfig, default_sampler, guided_x0
 from physmotion.diffusion.schedule import DiffusionConfig, sampling_scheduler
 from physmotion.errors import PhysmotionError, ShapeError
 from physmotion.features.humanml3d import extract_features, recover_from_ric
@@ -37,12 +38,15 @@ from physmotion.text.encoder import load_text_encoder
 @dataclass
 class RefineConfig:
     """strength: share of the DDIM steps inverted, in (0, 1]; steps: DDIM steps of the full schedule;
-    cfg_scale: guidance of the denoising half; text: caption to condition on ("" = unconditional)."""
+    cfg_scale: guidance of the denoising half; text: caption to condition on ("" = unconditional);
+    phys_scale: physics guidance of a BioMoDiffuse model (None: the model's sampling default, Eq. 11's
+    "forward diffusion with our physics guidance"; other models have none)."""
 
     strength: float = 0.3
     steps: int = 50
     cfg_scale: float = 2.5
     text: str = ""
+    phys_scale: float | None = None
 
     def check(self) -> None:
         if not (np.isfinite(self.strength) and 0.0 < self.strength <= 1.0):
@@ -51,6 +55,7 @@ class RefineConfig:
             raise PhysmotionError(f"steps must be between 1 and 1000, got {self.steps}")
         if not np.isfinite(self.cfg_scale):
             raise PhysmotionError(f"cfg_scale must be a finite number, got {self.cfg_scale}")
+        SamplerConfig(cfg_scale=self.cfg_scale, phys_scale=self.phys_scale).check()
 
     @property
     def inverted_steps(self) -> int:
@@ -86,13 +91,15 @@ def refine(model: MotionDiffusion, joints: np.ndarray, fps: float, config: Refin
     """
     cfg = config or RefineConfig()
     cfg.check()
+    SamplerConfig(phys_scale=cfg.phys_scale).check_model(model)
     pos = check_motion(joints, fps, model)
     dim = model.denoiser.feature_dim
     _, canonical = extract_features(pos)
     feats = joints_to_features(pos, dim)  # T rows: the last one extrapolated (physdiff's convention)
     device = next(model.net.parameters()).device
     x = torch.from_numpy(model.normalizer.normalize(feats)).float()[None].to(device)
-    guide = _Guide(model, cfg.text, device, len(pos))
+    phys = cfg.phys_scale if cfg.phys_scale is not None else default_sampler(model).phys_scale
+    guide = _Guide(model, cfg.text, device, len(pos), phys)
     k = cfg.inverted_steps
     x = _invert(x, guide, k, cfg.steps, model.diffusion)
     x = _denoise(x, guide, k, cfg.steps, cfg.cfg_scale, model.diffusion)
@@ -102,10 +109,12 @@ def refine(model: MotionDiffusion, joints: np.ndarray, fps: float, config: Refin
 
 
 class _Guide:
-    """The model's x0 prediction for one motion, guided: uncond + s (cond - uncond); uncond only for ""."""
+    """The model's x0 prediction for one motion, guided: uncond + s (cond - uncond); uncond only for "";
+    physics guidance on top for a BioMoDiffuse model (:func:`guided_x0`)."""
 
-    def __init__(self, model: MotionDiffusion, text: str, device: torch.device, frames: int) -> None:
-        self.model, self.text = model, text.strip()
+    def __init__(self, model: MotionDiffusion, text: str, device: torch.device, frames: int,
+                 phys_scale: float | None = None) -> None:  # fmt: skip
+        self.model, self.text, self.phys_scale = model, text.strip(), phys_scale
         # with no caption every pass drops the text (the null condition); any caption fills the slot
         self.enc = load_text_encoder(model.text_encoder).encode([self.text or "a person"]).to(device)
         self.mask = torch.ones(1, frames, dtype=torch.bool, device=device)
@@ -113,12 +122,8 @@ class _Guide:
 
     def __call__(self, x: torch.Tensor, t: int, scale: float) -> torch.Tensor:
         tt = torch.full((1,), int(t), device=self.device)
-        drop_all = torch.ones(1, dtype=torch.bool, device=self.device)
-        uncond = self.model.net(x, tt, self.enc, self.mask, drop_all)
-        if not self.text or scale == 0.0:
-            return uncond
-        cond = self.model.net(x, tt, self.enc, self.mask, ~drop_all)
-        return uncond + scale * (cond - uncond)
+        return guided_x0(self.model.net, x, tt, self.enc, self.mask, scale, with_text=bool(self.text) and scale != 0.0,
+                         phys_scale=self.phys_scale)  # fmt: skip
 
 
 def _inverse_scheduler(steps: int, diffusion: DiffusionConfig):

@@ -10,7 +10,7 @@ DDPM and DDIM with eta > 0 draw from one generator seeded by ``seed``.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -20,18 +20,27 @@ from physmotion.diffusion.schedule import SAMPLERS, sampling_scheduler
 from physmotion.errors import PhysmotionError
 from physmotion.text.encoder import TextFeatures, load_text_encoder
 
+BIOMO_PHYS_SCALE = 1.0  # measured on the val split: docs/decisions.md, "physics guidance weight"
+
 # (x0 normalised (B, T, D), lengths (B,)) -> replacement x0 of the same shape
 X0Hook = Callable[[torch.Tensor, list[int]], torch.Tensor]
 
 
 @dataclass
 class SamplerConfig:
-    """How to sample: which scheduler, how many steps, how much guidance."""
+    """How to sample: which scheduler, how many steps, how much guidance.
+
+    phys_scale and speed apply to BioMoDiffuse models (``arch="biomo"``) only: phys_scale None runs the
+    physical network on every pass; a number w forms physics guidance (:func:`guided_x0`), 0 being the
+    model without its physical network. speed scales the physical network's accelerations (Sec. 3.4).
+    """
 
     sampler: str = "ddim"
     steps: int = 50
     eta: float = 0.0  # DDIM only: 0 is deterministic DDIM, 1 is DDPM-like
     cfg_scale: float = 2.5
+    phys_scale: float | None = None
+    speed: float = 1.0
 
     def check(self) -> None:
         if self.sampler not in SAMPLERS:
@@ -40,6 +49,72 @@ class SamplerConfig:
             raise PhysmotionError(f"steps must be between 1 and 1000, got {self.steps}")
         if not 0.0 <= self.eta <= 1.0:
             raise PhysmotionError(f"eta must be between 0 and 1, got {self.eta}")
+        if not np.isfinite(self.cfg_scale):
+            raise PhysmotionError(f"cfg_scale must be a finite number, got {self.cfg_scale}")
+        if self.phys_scale is not None and not (np.isfinite(self.phys_scale) and self.phys_scale >= 0):
+            raise PhysmotionError(f"phys_scale must be a number >= 0, got {self.phys_scale}")
+        if not (np.isfinite(self.speed) and 0.0 < self.speed <= 4.0):
+            raise PhysmotionError(f"speed must be in (0, 4], got {self.speed}")
+
+    def check_model(self, model: MotionDiffusion) -> None:
+        """Refuse the BioMoDiffuse-only options for a model without a physical network."""
+        if model.denoiser.arch != "biomo" and (self.phys_scale is not None or self.speed != 1.0):
+            raise PhysmotionError(f"--phys-scale and --speed need a BioMoDiffuse model (arch biomo); this one "
+                                  f"is a {model.denoiser.arch}")  # fmt: skip
+
+
+BIOMO_SAMPLER = SamplerConfig(sampler="dpmpp-sde", steps=10, cfg_scale=2.5, phys_scale=BIOMO_PHYS_SCALE)
+"""BioMoDiffuse's sampling default (App. B): SDE DPM-Solver++ 2nd order, Karras sigmas, 10 steps, CFG 2.5,
+with physics guidance (its weight: docs/decisions.md, "physics guidance weight")."""
+
+
+def default_sampler(model: MotionDiffusion) -> SamplerConfig:
+    """The sampler a model is meant to be used with: BioMoDiffuse's for ``biomo``, else DDIM 50."""
+    return replace(BIOMO_SAMPLER) if model.denoiser.arch == "biomo" else SamplerConfig()
+
+
+def guided_x0(
+    net: torch.nn.Module,
+    x: torch.Tensor,
+    t: torch.Tensor,
+    text: TextFeatures,
+    mask: torch.Tensor,
+    cfg_scale: float,
+    *,
+    with_text: bool = True,
+    phys_scale: float | None = None,
+    speed: float = 1.0,
+) -> torch.Tensor:
+    """The guided x0 prediction (B, T, D) at timesteps t (B,), all passes in one batch.
+
+    Text (classifier-free): x0 = u + s (c - u), or u alone with ``with_text=False``. A BioMoDiffuse net
+    with ``phys_scale`` w adds physics guidance, the two conditions composed as in compositional CFG
+    (Liu et al. 2022; InstructPix2Pix's two-scale form): with u_n, c_n the predictions without the
+    physical network and c_p with it, x0 = u_n + s (c_n - u_n) + w (c_p - c_n) (without text:
+    u_n + w (u_p - u_n)). w = 0 is exactly the model without its physical network, w = 1 with s = 1
+    the physics-conditioned prediction. ``phys_scale`` None: the physical network runs on every pass.
+    """
+    biomo = getattr(net, "physics", None) is not None
+    b = len(x)
+    guided = biomo and phys_scale is not None and phys_scale != 0.0
+    no_phys = biomo and (phys_scale == 0.0 or guided)  # the base predictions run without physics
+    # passes, named by their condition: c / u = with / without text, _p with the physical network
+    passes = {"c": (False, no_phys)} if with_text else {}
+    passes["u"] = (True, no_phys)
+    if guided:
+        passes["p"] = (not with_text, False)  # c_p, or u_p without text
+    n = len(passes)
+    drop_text = torch.tensor([v[0] for v in passes.values() for _ in range(b)], device=x.device)
+    kwargs = {}
+    if biomo:
+        kwargs = {"drop_phys": torch.tensor([v[1] for v in passes.values() for _ in range(b)], device=x.device),
+                  "speed": speed}  # fmt: skip
+    texts = TextFeatures(text.tokens.repeat(n, 1, 1), text.mask.repeat(n, 1), text.pooled.repeat(n, 1))
+    out = dict(zip(passes, net(x.repeat(n, 1, 1), t.repeat(n), texts, mask.repeat(n, 1), drop_text, **kwargs).chunk(n)))
+    x0 = out["u"] + cfg_scale * (out["c"] - out["u"]) if with_text else out["u"]
+    if guided:
+        x0 = x0 + phys_scale * (out["p"] - out["c" if with_text else "u"])
+    return x0
 
 
 def initial_noise(batch: int, frames: int, dim: int, seed: int) -> torch.Tensor:
@@ -71,8 +146,9 @@ def sample(
     ``initial_noise(B, max(lengths), D, seed)`` (a caller whose samples must not depend on the batch
     they are drawn in, e.g. Morph's synthetic data, seeds each row itself).
     """
-    cfg = config or SamplerConfig()
+    cfg = config or default_sampler(model)
     cfg.check()
+    cfg.check_model(model)
     if len(texts) != len(lengths) or not texts:
         raise PhysmotionError("give one length per text, and at least one text")
     max_frames = model.denoiser.max_frames
@@ -90,15 +166,11 @@ def sample(
     x0_noise = initial_noise(b, width, model.denoiser.feature_dim, seed) if noise is None else noise.float()
     x = x0_noise.to(device) * sched.init_noise_sigma
     gen = torch.Generator().manual_seed(seed)
-    both = _doubled(text)
-    drop = torch.cat([torch.zeros(b, dtype=torch.bool), torch.ones(b, dtype=torch.bool)]).to(device)
     hook_at = set(hook_steps)
     timesteps = sched.timesteps
     for i, t in enumerate(timesteps):
-        tt = torch.full((2 * b,), int(t), device=device)
-        out = model.net(torch.cat([x, x]), tt, both, torch.cat([mask, mask]), drop)
-        cond, uncond = out[:b], out[b:]
-        x0 = uncond + cfg.cfg_scale * (cond - uncond)
+        tt = torch.full((b,), int(t), device=device)
+        x0 = guided_x0(model.net, x, tt, text, mask, cfg.cfg_scale, phys_scale=cfg.phys_scale, speed=cfg.speed)
         if hook is not None and i in hook_at:
             x0 = hook(x0, list(lengths)).to(x0)
         kwargs = {"eta": cfg.eta} if cfg.sampler == "ddim" else {}
@@ -107,9 +179,3 @@ def sample(
         if on_step is not None:
             on_step(i + 1, len(timesteps))
     return x
-
-
-def _doubled(text: TextFeatures) -> TextFeatures:
-    """The text batch twice: conditional half, then the half that will be dropped (null condition)."""
-    return TextFeatures(torch.cat([text.tokens, text.tokens]), torch.cat([text.mask, text.mask]),
-                        torch.cat([text.pooled, text.pooled]))  # fmt: skip

@@ -6,7 +6,8 @@ predicts x0 (``prediction_type="sample"``), so every diffusers scheduler can ste
 Sampling schedulers:
 - ``ddpm``: ancestral DDPM (``DDPMScheduler``) on a subset of steps;
 - ``ddim``: ``DDIMScheduler`` with eta (0 = deterministic), the one PhysDiff's Algorithm 2 uses;
-- ``dpmpp``: 2nd-order multistep DPM-Solver++ (``DPMSolverMultistepScheduler``) with Karras spacing.
+- ``dpmpp``: 2nd-order multistep DPM-Solver++ (``DPMSolverMultistepScheduler``) with Karras spacing;
+- ``dpmpp-sde``: its SDE variant (``algorithm_type="sde-dpmsolver++"``), BioMoDiffuse's sampler (App. B).
 
 The Karras pitfall: with the cosine schedule, diffusers' ``use_karras_sigmas=True`` starts from the
 schedule's sigma_max of ~2e4, and the first half of the Karras sigmas all round to timestep 998 (at 10
@@ -22,7 +23,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-SAMPLERS = ("ddpm", "ddim", "dpmpp")
+SAMPLERS = ("ddpm", "ddim", "dpmpp", "dpmpp-sde")
 KARRAS_SIGMA_MAX = 80.0
 KARRAS_RHO = 7.0
 
@@ -86,7 +87,8 @@ def sampling_scheduler(name: str, steps: int, cfg: DiffusionConfig):
         sched = DDIMScheduler(**_common(cfg), clip_sample=False, set_alpha_to_one=True, timestep_spacing="trailing")
         sched.set_timesteps(steps)
     else:
-        sched = DPMSolverMultistepScheduler(**_common(cfg), algorithm_type="dpmsolver++", solver_order=2,
+        algorithm = "sde-dpmsolver++" if name == "dpmpp-sde" else "dpmsolver++"
+        sched = DPMSolverMultistepScheduler(**_common(cfg), algorithm_type=algorithm, solver_order=2,
                                             final_sigmas_type="zero")  # fmt: skip
         sched.set_timesteps(timesteps=karras_timesteps(sched.alphas_cumprod.numpy(), steps))
         sched.set_begin_index(0)

@@ -34,6 +34,8 @@ from physmotion.diffusion.denoiser import DenoiserConfig, build_denoiser
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.schedule import DiffusionConfig, training_scheduler
 from physmotion.errors import PhysmotionError
+from physmotion.features.biomech import FEATURE_DIM_BIOMECH, SLICES_BIOMECH
+from physmotion.features.humanml3d import FEATURE_DIM
 from physmotion.motion import write_atomic
 from physmotion.text.encoder import load_text_encoder
 from physmotion.training import (
@@ -73,6 +75,14 @@ class TrainConfig:
     ema_decay: float = 0.999
     grad_clip: float = 1.0
     text_drop: float = 0.1
+    # BioMoDiffuse (Sec. 3.3, Eq. 8-9): with 329-d features the loss is L_diffusion (the 263 HumanML3D dims)
+    # + accel_weight * L_accel (the 66 joint-acceleration dims of the output); "biomo" adds
+    # phys_weight * L_phys (the physical network's accelerations) + emg_weight * L_emg (its activations
+    # against the cached stand-ins), and drops the physical network with probability phys_drop (P_c).
+    accel_weight: float = 1.0
+    phys_weight: float = 1.0
+    emg_weight: float = 1.0
+    phys_drop: float = 0.1
     bf16: bool | None = None  # bf16 autocast; None: where the hardware has it natively (bf16_helps)
     device: str = "cpu"
     seed: int = 0
@@ -85,6 +95,7 @@ class TrainResult:
     step: int
     losses: list[tuple[int, float]]  # (step, mean loss over the last log_every steps)
     seconds: float
+    terms: list[dict[str, float]] = field(default_factory=list)  # per losses entry: each loss term's mean
 
 
 def masked_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
@@ -136,8 +147,12 @@ def train_denoiser(
 
     # The crop sets the window length only: every motion of up to 196 frames is kept and cropped. (Up to
     # step 7904 the shipped model's run passed the crop as max_frames, which dropped the longer ones.)
+    biomo = (init.denoiser if init is not None else cfg.denoiser).arch == "biomo"
     if dataset is None:
-        dataset = MotionDataset(cfg.data, "train", crop=cfg.crop, random_crop=cfg.random_crop, seed=cfg.seed)
+        if biomo:
+            _check_biomo_data(cfg.data)
+        dataset = MotionDataset(cfg.data, "train", crop=cfg.crop, random_crop=cfg.random_crop, seed=cfg.seed,
+                                activations=biomo)  # fmt: skip
     encoder = load_text_encoder(cfg.text_encoder)
     if init is not None:
         if init.text_encoder != cfg.text_encoder or init.diffusion != cfg.diffusion:
@@ -154,26 +169,30 @@ def train_denoiser(
     accel = _accelerator(cfg.device == "cpu", cfg.bf16)
     torch.manual_seed(cfg.seed)
     net = build_denoiser(cfg.denoiser)
+    if biomo:
+        net.physics.set_feature_stats(torch.from_numpy(dataset.normalizer.mean), torch.from_numpy(dataset.normalizer.std))
     if init is not None:
         net.load_state_dict(init.net.state_dict())
     opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     ema = EMAModel(net.parameters(), decay=cfg.ema_decay)
-    step, losses = 0, []
+    step, losses, terms = 0, [], []
     if resume:
         state = torch.load(state_path, map_location="cpu", weights_only=False)
         net.load_state_dict(state["net"])
         opt.load_state_dict(state["opt"])
         ema.load_state_dict(state["ema"])
         step, losses = state["step"], [tuple(x) for x in state["losses"]]
+        terms = state.get("terms", [])
     net, opt = accel.prepare(net, opt)
     ema.to(accel.device)
     noise_sched = training_scheduler(cfg.diffusion)
 
     def save() -> None:
-        _save(cfg, out, accel.unwrap_model(net), opt, ema, step, losses, dataset, info)
+        _save(cfg, out, accel.unwrap_model(net), opt, ema, step, losses, terms, dataset, info)
 
     t0 = last_save = time.monotonic()
     window: list[float] = []
+    window_terms: dict[str, list[float]] = {}
     bar = loss_bar(progress, cfg.steps, step)
     net.train()
     while step < cfg.steps:
@@ -189,13 +208,18 @@ def train_denoiser(
         t = torch.randint(0, cfg.diffusion.num_train_timesteps, (len(idx),), generator=g)
         noise = torch.randn(x0.shape, generator=g)
         drop = torch.rand(len(idx), generator=g) < cfg.text_drop
+        drop_phys = (torch.rand(len(idx), generator=g) < cfg.phys_drop).to(accel.device) if biomo else None
         xt = noise_sched.add_noise(x0.cpu(), noise, t).to(accel.device)
         seed_dropout(g)  # dropout masks of this step
         for group in opt.param_groups:
             group["lr"] = warmup_lr(cfg.lr, cfg.warmup, step)
         with accel.autocast():
-            pred = net(xt, t.to(accel.device), text, mask, drop.to(accel.device))
-        loss = masked_mse(pred.float(), x0, mask)
+            if biomo:
+                pred, acc, u = net(xt, t.to(accel.device), text, mask, drop.to(accel.device), drop_phys, physics=True)
+            else:
+                pred, acc, u = net(xt, t.to(accel.device), text, mask, drop.to(accel.device)), None, None
+        parts = loss_terms(pred.float(), x0, mask, acc, u, batch.get("activations"), accel.unwrap_model(net))
+        loss = _weighted(parts, cfg)
         check_finite(loss, step)
         opt.zero_grad(set_to_none=True)
         accel.backward(loss)
@@ -204,9 +228,13 @@ def train_denoiser(
         ema.step(accel.unwrap_model(net).parameters())
         step += 1
         window.append(loss.item())
+        for name, value in parts.items():
+            window_terms.setdefault(name, []).append(value.item())
         if len(window) == cfg.log_every or step == cfg.steps:
             losses.append((step, float(np.mean(window))))
-            window = []
+            if len(window_terms) > 1:
+                terms.append({k: float(np.mean(v)) for k, v in window_terms.items()})
+            window, window_terms = [], {}
         if bar is not None:
             bar.update(step, loss=losses[-1][1] if losses else loss.item())
         if time.monotonic() - last_save > cfg.checkpoint_minutes * 60 and accel.is_main_process:
@@ -216,14 +244,58 @@ def train_denoiser(
         bar.close()
     if accel.is_main_process:
         save()
-    return TrainResult(step=step, losses=losses, seconds=time.monotonic() - t0)
+    return TrainResult(step=step, losses=losses, seconds=time.monotonic() - t0, terms=terms)
 
 
-def _save(cfg: TrainConfig, out: Path, net: torch.nn.Module, opt, ema, step: int,
-          losses: list, dataset: Dataset, extra: dict | None = None) -> None:  # fmt: skip
+def loss_terms(
+    pred: torch.Tensor,
+    x0: torch.Tensor,
+    mask: torch.Tensor,
+    acc: torch.Tensor | None = None,
+    u: torch.Tensor | None = None,
+    activations: torch.Tensor | None = None,
+    net: torch.nn.Module | None = None,
+) -> dict[str, torch.Tensor]:
+    """The unweighted loss terms of one batch (normalised feature units).
+
+    pred, x0: (B, T, D) predicted and true x0; mask (B, T). D = 263: ``diffusion`` only (MDM's x0 MSE).
+    D = 329: ``diffusion`` over the 263 HumanML3D dims and ``accel`` (BioMoDiffuse's L_accel, Eq. 8) over
+    the 66 joint-acceleration dims. With the physical network's acc (B, T, 22, 3) m/s^2 and u (B, T, 8):
+    ``phys`` (L_phys: acc against the true accelerations) and ``emg`` (u against ``activations``)."""
+    if pred.shape[-1] != FEATURE_DIM_BIOMECH:
+        return {"diffusion": masked_mse(pred, x0, mask)}
+    hml, jacc = slice(0, FEATURE_DIM), SLICES_BIOMECH["joint_acc"]
+    out = {"diffusion": masked_mse(pred[..., hml], x0[..., hml], mask),
+           "accel": masked_mse(pred[..., jacc], x0[..., jacc], mask)}  # fmt: skip
+    if acc is not None and net is not None:
+        out["phys"] = masked_mse(net.physics.to_features(acc.float()), x0[..., jacc], mask)
+        if u is not None and activations is not None:
+            out["emg"] = masked_mse(u.float(), activations.to(u.device), mask)
+    return out
+
+
+def _weighted(parts: dict[str, torch.Tensor], cfg: TrainConfig) -> torch.Tensor:
+    weights = {"diffusion": 1.0, "accel": cfg.accel_weight, "phys": cfg.phys_weight, "emg": cfg.emg_weight}
+    return sum(weights[k] * v for k, v in parts.items())
+
+
+def _check_biomo_data(root: str | Path) -> None:
+    """The biomo denoiser trains on a 329-d build with cached activations; say how to make one."""
+    from physmotion.data.build import ACTIVATIONS
+    from physmotion.features.normalize import Normalizer
+
+    how = "build one with `physmotion data build --features 329 --activations`"
+    if Normalizer.load(root).dim != FEATURE_DIM_BIOMECH:
+        raise PhysmotionError(f"{root}: --arch biomo needs {FEATURE_DIM_BIOMECH}-d features; {how}")
+    if not (Path(root) / ACTIVATIONS).is_dir():
+        raise PhysmotionError(f"{root}: --arch biomo needs cached muscle activations; {how}")
+
+
+def _save(cfg: TrainConfig, out: Path, net: torch.nn.Module, opt, ema, step: int, losses: list,
+          terms: list, dataset: Dataset, extra: dict | None = None) -> None:  # fmt: skip
     """Checkpoint: resumable state first, then the EMA model for sampling, then the loss log."""
     state = {"net": net.state_dict(), "opt": opt.state_dict(), "ema": ema.state_dict(), "step": step,
-             "losses": losses, "config": asdict(cfg)}  # fmt: skip
+             "losses": losses, "terms": terms, "config": asdict(cfg)}  # fmt: skip
     write_atomic(out / STATE_FILE, lambda f: torch.save(state, f))
     ema_net = build_denoiser(cfg.denoiser)
     ema.copy_to(ema_net.parameters())
@@ -232,7 +304,10 @@ def _save(cfg: TrainConfig, out: Path, net: torch.nn.Module, opt, ema, step: int
     info = {"data": str(cfg.data), "licence_tags": build_info.get("licence_tags", ["unknown"]),
             "train_items": len(dataset), "steps": step, "train": _summary(cfg)} | (extra or {})  # fmt: skip
     MotionDiffusion(ema_net.eval(), cfg.denoiser, cfg.diffusion, dataset.normalizer, cfg.text_encoder, info).save(out)
-    lines = "step,loss\n" + "".join(f"{s},{v:.6f}\n" for s, v in losses)
+    names = list(terms[0]) if terms and len(terms) == len(losses) else []
+    lines = ",".join(["step", "loss", *names]) + "\n"
+    for k, (s, v) in enumerate(losses):
+        lines += ",".join([str(s), f"{v:.6f}", *(f"{terms[k][n]:.6f}" for n in names)]) + "\n"
     write_atomic(out / LOSS_FILE, lambda f: f.write(lines), "w")
 
 

@@ -58,12 +58,13 @@ class _CrossAttention(nn.Module):
 class UNetDenoiser(nn.Module):
     """x0 = f(x_t, t, text): x (B, T, D) normalised features, mask (B, T) True on real frames."""
 
-    def __init__(self, config: DenoiserConfig) -> None:
+    def __init__(self, config: DenoiserConfig, extra_channels: int = 0) -> None:
+        """extra_channels: per-frame inputs concatenated to x (BioMoDiffuse's physical network output)."""
         super().__init__()
         self.config = c = config
         self.cond = TimeTextCondition(c.d_model, c.text_dim)
         chans = [c.d_model * (1 if i < 2 else 2) for i in range(c.layers + 1)]
-        self.in_conv = nn.Conv1d(c.feature_dim, chans[0], 3, padding=1)
+        self.in_conv = nn.Conv1d(c.feature_dim + extra_channels, chans[0], 3, padding=1)
         self.down = nn.ModuleList()
         for i in range(c.layers):
             self.down.append(nn.ModuleList([
@@ -91,8 +92,12 @@ class UNetDenoiser(nn.Module):
         text: TextFeatures,
         mask: torch.Tensor,
         drop_text: torch.Tensor | None = None,
+        extra: torch.Tensor | None = None,
     ) -> torch.Tensor:
+        """extra: (B, T, extra_channels) inputs beside x, or None when the network has none."""
         frames = x.shape[1]
+        if extra is not None:
+            x = torch.cat([x, extra.to(x)], dim=-1)
         cond, words, word_mask = self.cond(t, text, drop_text)
         context = torch.cat([cond[:, None], words], dim=1)
         context_mask = torch.cat([torch.ones_like(word_mask[:, :1]), word_mask], dim=1)
