@@ -1,10 +1,14 @@
 """Generation wall time by physics mode, one table from one run (compare the ratios).
 
-Usage: python bench/generate.py [--model DIR] [--seconds 6] [--repeats 2]
+Usage: python bench/generate.py [--model DIR] [--biomo DIR] [--seconds 6] [--repeats 2]
 Modes: none, post:4 (as many projections as PhysDiff's default) and physdiff:end:4,space:1; batches of 1
 and 16 motions (one caption each, from the physics prompt set); 50 DDIM steps, CFG 2.5. The model and the
 text encoder are loaded and warmed up once before timing; each time is the best of ``--repeats`` rounds.
 PhysDiff reports 2.5x none at batch 1.
+
+With ``--biomo DIR`` (a BioMoDiffuse model, e.g. ``runs/biomo_ablation/biomo`` from
+``scripts/biomodiffuse_table.py``) a row times it without projection at its own sampler (SDE DPM-Solver++,
+10 steps, physics guidance: three network passes per step) against the transformer's ``none`` row.
 
 The last row is the physics floor: plain sampling plus the time PhysDiff spends inside MuJoCo's ``mj_step``.
 At batch 1 it is clocked during the best timed run (one motion is projected in this process); at batch 16
@@ -27,11 +31,13 @@ from rich.console import Console
 from rich.table import Table
 
 from physmotion.diffusion.model import MotionDiffusion
+from physmotion.diffusion.samplers import default_sampler
 from physmotion.eval.prompts import PHYSICS_PROMPTS
 from physmotion.generate import GenerateConfig, generate
 
 MODES = ("none", "post:4", "physdiff:end:4,space:1")
 PHYSDIFF = MODES[-1]
+BIOMO = "BioMoDiffuse none (dpmpp-sde 10 steps)"
 
 
 @contextmanager
@@ -58,21 +64,27 @@ def main() -> None:
     parser.add_argument("--model", default=None)
     parser.add_argument("--seconds", type=float, default=6.0)
     parser.add_argument("--repeats", type=int, default=2, help="rounds over all modes; the best time counts")
+    parser.add_argument("--biomo", default=None, help="a BioMoDiffuse model folder to time beside the others")
     args = parser.parse_args()
     model = MotionDiffusion.load(args.model)
     base = GenerateConfig(seconds=args.seconds)
     generate(PHYSICS_PROMPTS[:1], replace(base, physics="none"), model)  # warm-up: encoder load, first calls
+    runs = {mode: (model, replace(base, physics=mode)) for mode in MODES}
+    if args.biomo:
+        biomo = MotionDiffusion.load(args.biomo)
+        runs[BIOMO] = (biomo, replace(base, physics="none", sampler=default_sampler(biomo)))
+        generate(PHYSICS_PROMPTS[:1], runs[BIOMO][1], biomo)
     times: dict[tuple[str, int], float] = {}
     stepping = 0.0  # mj_step seconds inside the best PhysDiff run at batch 1
     # Rounds interleave the modes, so a slow spell of the shared machine hits all of them alike.
     for _ in range(max(1, args.repeats)):
         for batch in (1, 16):
-            for mode in MODES:
+            for mode, (net, config) in runs.items():
                 clocked = (mode, batch) == (PHYSDIFF, 1)  # the projection runs in this process only there
                 inside = [0.0]
                 with _mj_step_clock(inside) if clocked else nullcontext():
                     start = time.perf_counter()
-                    generate(PHYSICS_PROMPTS[:batch], replace(base, physics=mode), model)
+                    generate(PHYSICS_PROMPTS[:batch], config, net)
                     seconds = time.perf_counter() - start
                 if seconds < times.get((mode, batch), float("inf")):
                     times[mode, batch] = seconds
@@ -83,11 +95,11 @@ def main() -> None:
     with _mj_step_clock(inside):
         generate(PHYSICS_PROMPTS[:16], replace(config, projection=replace(config.projection, workers=1)), model)
     floor = {1: times["none", 1] + stepping, 16: times["none", 16] + inside[0] / (os.cpu_count() or 1)}
-    table = Table(title=f"generation wall time, {args.seconds:g} s motions, 50 DDIM steps, "
+    table = Table(title=f"generation wall time, {args.seconds:g} s motions, 50 DDIM steps (BioMoDiffuse: its own), "
                         f"best of {max(1, args.repeats)}")
     for col in ("mode", "batch 1 (s)", "batch 16 (s)", "s/motion at 16", "vs none, batch 1", "vs none, batch 16"):
         table.add_column(col, justify="left" if col == "mode" else "right")
-    for mode in MODES:
+    for mode in runs:
         table.add_row(mode, f"{times[mode, 1]:.2f}", f"{times[mode, 16]:.2f}", f"{times[mode, 16] / 16:.2f}",
                       f"{times[mode, 1] / times['none', 1]:.2f}x", f"{times[mode, 16] / times['none', 16]:.2f}x")
     table.add_row("floor: none + PhysDiff's mj_step", f"{floor[1]:.2f}", f"{floor[16]:.2f}", f"{floor[16] / 16:.2f}",

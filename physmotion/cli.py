@@ -283,8 +283,8 @@ def refine_cmd(
     text: str = typer.Option("", help="Caption to condition on (default: none)."),
     model_dir: Path | None = typer.Option(None, "--model", help="Model folder (default: the shipped model)."),
     steps: int = typer.Option(50, help="DDIM steps of the full schedule."),
-    phys_scale: float | None = typer.Option(None, help="BioMoDiffuse models: physics guidance weight "
-                                            "(default: the model's sampler's; other models have none)."),
+    phys_scale: float | None = typer.Option(None, help="BioMoDiffuse models only: physics guidance weight "
+                                            "(default: 1)."),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
     """Refine a motion by DDIM inversion and denoising (BioMoDiffuse Sec. 3.5; physics guidance with a
@@ -338,14 +338,15 @@ def generate_cmd(
     num: int | None = typer.Option(None, help="Samples per caption (default: 1)."),
     seed: int | None = typer.Option(None, help="Random seed; the same seed gives the same motions (default: 0)."),
     sampler: str | None = typer.Option(None, help="ddim, ddpm, dpmpp (DPM-Solver++ 2M, Karras) or dpmpp-sde "
-                                       "(its SDE variant) (default: ddim; dpmpp-sde for a BioMoDiffuse model)."),
-    steps: int | None = typer.Option(None, help="Sampling steps (default: 50; 10 for a BioMoDiffuse model)."),
+                                       "(its SDE variant; a BioMoDiffuse model's default, with 10 steps) "
+                                       "(default: ddim)."),
+    steps: int | None = typer.Option(None, help="Sampling steps (default: 50)."),
     eta: float | None = typer.Option(None, help="DDIM eta (default: 0)."),
     cfg_scale: float | None = typer.Option(None, help="Classifier-free guidance scale (default: 2.5)."),
-    phys_scale: float | None = typer.Option(None, help="BioMoDiffuse models: physics guidance weight, 0 = "
-                                            "without the physical network (default: the model's sampler's)."),
-    speed: float | None = typer.Option(None, help="BioMoDiffuse models: speed control signal, scales the "
-                                       "physical network's accelerations (default: 1)."),
+    phys_scale: float | None = typer.Option(None, help="BioMoDiffuse models only: physics guidance weight, "
+                                            "0 = without the physical network (default: 1)."),
+    speed: float | None = typer.Option(None, help="BioMoDiffuse models only: speed control signal, scales "
+                                       "the physical network's accelerations (default: 1)."),
     model: Path | None = typer.Option(None, help="Model folder; the shipped model if left out."),
     preview: bool = typer.Option(True, help="Write a GIF preview per motion."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace files of the same names instead of "
@@ -450,10 +451,11 @@ def train_denoiser_cmd(
     checkpoint_minutes: float | None = typer.Option(
         None, help="Minutes between atomic checkpoints (default: 5.0)."),
     accel_weight: float | None = typer.Option(None, help="329-d data: weight of L_accel, the output's joint "
-                                              "accelerations (default: 1)."),
+                                              "accelerations (default: 1.0)."),
     phys_weight: float | None = typer.Option(None, help="biomo: weight of L_phys, the physical network's "
-                                             "accelerations (default: 1)."),
-    emg_weight: float | None = typer.Option(None, help="biomo: weight of its muscle-activation loss (default: 1)."),
+                                             "accelerations (default: 1.0)."),
+    emg_weight: float | None = typer.Option(None, help="biomo: weight of its muscle-activation loss "
+                                            "(default: 1.0)."),
     phys_drop: float | None = typer.Option(None, help="biomo: probability P_c of dropping the physical "
                                            "network, for physics guidance (default: 0.1)."),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in --out where it stopped."),
@@ -517,8 +519,8 @@ def evaluate_cmd(
         "(default: none,none+floor,post:1,post:4,physdiff:end:4,space:1)."),
     repeats: int | None = typer.Option(
         None, help="Repeated generation runs (95% intervals over them) (default: 3)."),
-    steps: int | None = typer.Option(None, help="Sampling steps (default: the model's: 50 DDIM, or 10 "
-                                     "DPM-Solver++ SDE for a BioMoDiffuse model)."),
+    steps: int | None = typer.Option(None, help="Sampling steps of the model's sampler; a BioMoDiffuse model "
+                                     "samples 10 SDE DPM-Solver++ steps (default: 50)."),
     seed: int | None = typer.Option(None, help="Random seed (default: 0)."),
     quick: bool = typer.Option(False, "--quick", help="Smoke run: 32 motions, 2 repeats, 10 steps."),
     out: Path = typer.Option(Path("results/evaluate"), "-o", "--out", help="Writes <out>.md and <out>.json."),

@@ -142,3 +142,45 @@ def tiny_evaluator(tiny_evaluator_dir: Path):
     from physmotion.eval.evaluator import Evaluator
 
     return Evaluator.load(tiny_evaluator_dir)
+
+
+# --- BioMoDiffuse (arch "biomo"): the 329-d build with its activation cache, and a tiny model on it ---
+
+
+@pytest.fixture(scope="session")
+def built329_dir(tmp_path_factory: pytest.TempPathFactory, mocap_dir: Path) -> Path:
+    """The whole mocap collection built with 329-d features (``BuildConfig(features=329)``) and its
+    muscle-activation cache, as ``data build --features 329 --activations`` makes it (about 30 s)."""
+    from physmotion.data.build import build_activations
+
+    out = tmp_path_factory.mktemp("build329") / "mocap"
+    build_dataset(mocap_dir, out, BuildConfig(features=329), progress=False)
+    build_activations(out, progress=False)
+    return out
+
+
+def tiny_biomo_config(data: Path, out: Path, **kw) -> TrainConfig:
+    """A small BioMoDiffuse denoiser (1D UNet + physical network) that trains in seconds on 2 CPU cores."""
+    den = DenoiserConfig(arch="biomo", feature_dim=329, d_model=kw.pop("d_model", 32), layers=kw.pop("layers", 2),
+                         heads=4, dropout=0.1, phys_hidden=kw.pop("phys_hidden", 32))  # fmt: skip
+    base = {"batch_size": 4, "crop": 40, "steps": 10, "lr": 1e-3, "warmup": 2, "log_every": 5,
+            "checkpoint_minutes": 60.0}  # fmt: skip
+    base.update(kw)
+    return TrainConfig(data=str(data), out=str(out), denoiser=den, **base)
+
+
+@pytest.fixture(scope="session")
+def tiny_biomo_dir(built329_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A tiny biomo model trained for 10 steps on the 329-d build: real weights, not a useful model."""
+    from physmotion.diffusion.train import train_denoiser
+
+    out = tmp_path_factory.mktemp("tiny_biomo")
+    train_denoiser(tiny_biomo_config(built329_dir, out), progress=False)
+    return out
+
+
+@pytest.fixture(scope="session")
+def tiny_biomo(tiny_biomo_dir: Path):
+    from physmotion.diffusion.model import MotionDiffusion
+
+    return MotionDiffusion.load(tiny_biomo_dir)

@@ -162,10 +162,13 @@ def test_help_defaults_are_the_dataclasses() -> None:
     from physmotion.eval.table import EvaluateConfig
     from physmotion.generate import GenerateConfig
 
+    from physmotion.diffusion.samplers import BIOMO_SAMPLER
+
     gen = GenerateConfig()
     expected = {"seconds": gen.seconds, "physics": gen.physics, "num": gen.num, "seed": gen.seed,
                 "sampler": gen.sampler.sampler, "steps": gen.sampler.steps, "eta": gen.sampler.eta,
-                "cfg-scale": gen.sampler.cfg_scale}  # fmt: skip
+                "cfg-scale": gen.sampler.cfg_scale, "phys-scale": BIOMO_SAMPLER.phys_scale,
+                "speed": gen.sampler.speed}  # fmt: skip
     stated = _help_defaults("generate")
     assert set(stated) == set(expected)
     for name, value in expected.items():
@@ -174,7 +177,9 @@ def test_help_defaults_are_the_dataclasses() -> None:
     train, den = TrainConfig(data="", out=""), DenoiserConfig()
     expected = {"arch": den.arch, "d-model": den.d_model, "layers": den.layers, "heads": den.heads,
                 "crop": train.crop, "batch-size": train.batch_size, "steps": train.steps, "lr": train.lr,
-                "device": train.device, "seed": train.seed, "checkpoint-minutes": train.checkpoint_minutes}  # fmt: skip
+                "device": train.device, "seed": train.seed, "checkpoint-minutes": train.checkpoint_minutes,
+                "accel-weight": train.accel_weight, "phys-weight": train.phys_weight,
+                "emg-weight": train.emg_weight, "phys-drop": train.phys_drop}  # fmt: skip
     stated = _help_defaults("train", "denoiser")
     assert set(stated) == set(expected)
     for name, value in expected.items():
@@ -184,3 +189,66 @@ def test_help_defaults_are_the_dataclasses() -> None:
     expected = {"split": ev.split, "physics": ",".join(ev.modes), "repeats": ev.repeats,
                 "steps": ev.base.sampler.steps, "seed": ev.seed}  # fmt: skip
     assert _help_defaults("evaluate") == {k: str(v) for k, v in expected.items()}
+
+
+# --- BioMoDiffuse options: data build --features, train denoiser --arch biomo, generate --phys-scale/--speed ---
+
+
+@pytest.mark.parametrize("option", [("--speed", "2"), ("--phys-scale", "0"), ("--phys-scale", "1.5")])
+def test_generate_biomo_options_refused_for_the_default_model(tmp_path: Path, option: tuple[str, str]) -> None:
+    out = tmp_path / "out"
+    res = run("generate", "a person walks forward", "-o", out, "--no-preview", *option)
+    assert res.returncode == 1
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and "biomo" in lines[0], res.stderr
+    assert "Traceback" not in res.stderr
+    assert not out.exists() or not list(out.iterdir())
+
+
+def test_generate_with_a_biomo_model(tiny_biomo_dir: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    common = ["generate", "a person walks forward", "-o", out, "--model", tiny_biomo_dir, "--physics", "none",
+              "--no-preview", "--seconds", "2"]  # fmt: skip
+    res = run(*common, "--speed", "1.5", "--phys-scale", "0.5")
+    assert res.returncode == 0, res.stderr
+    motion = Motion.load(next(out.glob("*.npz")))
+    assert motion.joints.shape == (40, 22, 3) and np.all(np.isfinite(motion.joints))
+    sampler = json.loads((out / "generate.json").read_text())["runs"][-1]["settings"]["sampler"]
+    assert (sampler["sampler"], sampler["steps"]) == ("dpmpp-sde", 10)  # the biomo model's default sampler
+    assert (sampler["phys_scale"], sampler["speed"]) == (0.5, 1.5)
+    for bad in (("--speed", "0"), ("--phys-scale", "-1")):
+        res = run(*common, "--overwrite", *bad)
+        assert res.returncode == 1 and res.stderr.startswith("error: ") and res.stderr.count("\n") == 1, res.stderr
+        assert bad[0].strip("-").replace("-", "_") in res.stderr
+
+
+def test_train_biomo_on_a_263_build_is_a_one_line_error(built_dir: Path, tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    res = run("train", "denoiser", "--data", built_dir, "--out", out, "--arch", "biomo", "--steps", "2")
+    assert res.returncode == 1 and "Traceback" not in res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and "329" in lines[0], res.stderr
+    assert not (out / "model.safetensors").exists()
+
+
+def test_train_biomo_options(built329_dir: Path, tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    res = run("train", "denoiser", "--data", built329_dir, "--out", out, "--arch", "biomo", "--d-model", "32",
+              "--layers", "2", "--batch-size", "4", "--crop", "40", "--steps", "2", "--accel-weight", "0.5",
+              "--phys-weight", "2", "--emg-weight", "3", "--phys-drop", "0.25")  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    config = json.loads((out / "config.json").read_text())
+    assert config["denoiser"]["arch"] == "biomo" and config["denoiser"]["feature_dim"] == 329
+    train = config["info"]["train"]
+    weights = (train["accel_weight"], train["phys_weight"], train["emg_weight"], train["phys_drop"])
+    assert weights == (0.5, 2, 3, 0.25)
+    assert (out / "loss.csv").read_text().splitlines()[0] == "step,loss,diffusion,accel,phys,emg"
+
+
+def test_data_build_refuses_other_feature_widths(mocap_dir: Path, tmp_path: Path) -> None:
+    out = tmp_path / "data"
+    res = run("data", "build", "--source", mocap_dir, "--out", out, "--features", "300")
+    assert res.returncode == 1 and "Traceback" not in res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and "263 or 329" in lines[0], res.stderr
+    assert not out.exists() or not list(out.iterdir())

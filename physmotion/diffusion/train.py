@@ -175,20 +175,22 @@ def train_denoiser(
         net.load_state_dict(init.net.state_dict())
     opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     ema = EMAModel(net.parameters(), decay=cfg.ema_decay)
-    step, losses, terms = 0, [], []
+    step, losses, terms, seconds_before = 0, [], [], 0.0
     if resume:
         state = torch.load(state_path, map_location="cpu", weights_only=False)
         net.load_state_dict(state["net"])
         opt.load_state_dict(state["opt"])
         ema.load_state_dict(state["ema"])
         step, losses = state["step"], [tuple(x) for x in state["losses"]]
-        terms = state.get("terms", [])
+        terms, seconds_before = state.get("terms", []), state.get("seconds", 0.0)
     net, opt = accel.prepare(net, opt)
     ema.to(accel.device)
     noise_sched = training_scheduler(cfg.diffusion)
 
     def save() -> None:
-        _save(cfg, out, accel.unwrap_model(net), opt, ema, step, losses, terms, dataset, info)
+        seconds = seconds_before + time.monotonic() - t0  # training time over every resumed part
+        _save(cfg, out, accel.unwrap_model(net), opt, ema, step, losses, terms, dataset,
+              {"train_seconds": round(seconds, 1)} | (info or {}))  # fmt: skip
 
     t0 = last_save = time.monotonic()
     window: list[float] = []
@@ -232,7 +234,7 @@ def train_denoiser(
             window_terms.setdefault(name, []).append(value.item())
         if len(window) == cfg.log_every or step == cfg.steps:
             losses.append((step, float(np.mean(window))))
-            if len(window_terms) > 1:
+            if len(window_terms) > 1 or terms:
                 terms.append({k: float(np.mean(v)) for k, v in window_terms.items()})
             window, window_terms = [], {}
         if bar is not None:
@@ -295,19 +297,23 @@ def _save(cfg: TrainConfig, out: Path, net: torch.nn.Module, opt, ema, step: int
           terms: list, dataset: Dataset, extra: dict | None = None) -> None:  # fmt: skip
     """Checkpoint: resumable state first, then the EMA model for sampling, then the loss log."""
     state = {"net": net.state_dict(), "opt": opt.state_dict(), "ema": ema.state_dict(), "step": step,
-             "losses": losses, "terms": terms, "config": asdict(cfg)}  # fmt: skip
+             "losses": losses, "terms": terms, "seconds": (extra or {}).get("train_seconds", 0.0),
+             "config": asdict(cfg)}  # fmt: skip
     write_atomic(out / STATE_FILE, lambda f: torch.save(state, f))
     ema_net = build_denoiser(cfg.denoiser)
-    ema.copy_to(ema_net.parameters())
+    ema_net.load_state_dict(net.state_dict())  # buffers (the physical network's feature statistics) too:
+    ema.copy_to(ema_net.parameters())  # the EMA holds the parameters only
     info_path = Path(cfg.data) / "build_info.json"
     build_info = json.loads(info_path.read_text()) if info_path.is_file() else {}
     info = {"data": str(cfg.data), "licence_tags": build_info.get("licence_tags", ["unknown"]),
             "train_items": len(dataset), "steps": step, "train": _summary(cfg)} | (extra or {})  # fmt: skip
     MotionDiffusion(ema_net.eval(), cfg.denoiser, cfg.diffusion, dataset.normalizer, cfg.text_encoder, info).save(out)
-    names = list(terms[0]) if terms and len(terms) == len(losses) else []
+    # A window where P_c dropped the physical network on every row has no phys/emg: the cell stays empty.
+    names = list(dict.fromkeys(n for t in terms for n in t)) if terms and len(terms) == len(losses) else []
     lines = ",".join(["step", "loss", *names]) + "\n"
     for k, (s, v) in enumerate(losses):
-        lines += ",".join([str(s), f"{v:.6f}", *(f"{terms[k][n]:.6f}" for n in names)]) + "\n"
+        cells = (f"{terms[k][n]:.6f}" if n in terms[k] else "" for n in names)
+        lines += ",".join([str(s), f"{v:.6f}", *cells]) + "\n"
     write_atomic(out / LOSS_FILE, lambda f: f.write(lines), "w")
 
 

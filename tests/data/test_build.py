@@ -233,3 +233,54 @@ def test_cli_build_with_activations(few_clips: Path, small_build: Path, tmp_path
     assert "activations for" in res.stdout
     for path in (small_build / "activations").glob("*.npy"):  # the same as the library's cache
         assert (out / "activations" / path.name).read_bytes() == path.read_bytes()
+
+
+# --- the 329-d build (BioMoDiffuse: the 263 HumanML3D features + 66 joint accelerations) ---
+
+
+def test_329_build_extends_the_263_build(built_dir: Path, built329_dir: Path) -> None:
+    for name in ("train.txt", "val.txt", "test.txt", "index.csv"):
+        assert (built329_dir / name).read_bytes() == (built_dir / name).read_bytes(), name
+    ids = sorted(p.stem for p in (built_dir / "new_joint_vecs").glob("*.npy"))
+    assert ids == sorted(p.stem for p in (built329_dir / "new_joint_vecs").glob("*.npy"))
+    for i in ids:
+        f263 = np.load(built_dir / "new_joint_vecs" / f"{i}.npy")
+        f329 = np.load(built329_dir / "new_joint_vecs" / f"{i}.npy")
+        assert f329.shape == (len(f263), 329) and f329.dtype == np.float32, i
+        np.testing.assert_array_equal(f329[:, :FEATURE_DIM], f263, err_msg=i)
+        assert np.all(np.isfinite(f329[:, FEATURE_DIM:]))
+        joints = np.load(built329_dir / "new_joints" / f"{i}.npy")
+        np.testing.assert_array_equal(joints, np.load(built_dir / "new_joints" / f"{i}.npy"), err_msg=i)
+    mean, std = np.load(built329_dir / "Mean.npy"), np.load(built329_dir / "Std.npy")
+    assert mean.shape == std.shape == (329,) and np.all(std > 0) and np.all(np.isfinite(mean))
+    np.testing.assert_allclose(mean[:FEATURE_DIM], np.load(built_dir / "Mean.npy"), rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(std[:FEATURE_DIM], np.load(built_dir / "Std.npy"), rtol=1e-5, atol=1e-7)
+    assert np.unique(std[FEATURE_DIM:]).size == 1  # joint_acc is one group: one std (cal_mean_variance)
+    assert json.loads((built329_dir / "build_info.json").read_text())["config"]["features"] == 329
+
+
+def test_329_joint_accelerations_are_second_differences_of_the_joints(built329_dir: Path) -> None:
+    """joint_acc (metres per frame^2, root frame): per joint, as long as the second difference of the
+    stored canonical joints (frames 1 .. T-2), and frame 0 repeats frame 1's magnitude."""
+    ids = sorted(p.stem for p in (built329_dir / "new_joint_vecs").glob("*.npy"))
+    for i in ids[::25]:
+        acc = np.load(built329_dir / "new_joint_vecs" / f"{i}.npy")[:, FEATURE_DIM:].reshape(-1, 22, 3)
+        joints = np.load(built329_dir / "new_joints" / f"{i}.npy").astype(np.float64)
+        second = joints[2:] - 2 * joints[1:-1] + joints[:-2]
+        np.testing.assert_allclose(np.linalg.norm(acc[1:-1], axis=-1), np.linalg.norm(second, axis=-1), atol=1e-6)
+        np.testing.assert_allclose(np.linalg.norm(acc[0], axis=-1), np.linalg.norm(acc[1], axis=-1), atol=1e-6)
+
+
+def test_329_build_has_activations_of_every_item(built329_dir: Path) -> None:
+    ids = sorted(p.stem for p in (built329_dir / "new_joint_vecs").glob("*.npy"))
+    assert sorted(p.stem for p in (built329_dir / "activations").glob("*.npy")) == ids
+    for i in ids[::20]:
+        act = load_activations(built329_dir, i)
+        assert act.shape == (len(np.load(built329_dir / "new_joint_vecs" / f"{i}.npy")), len(ACTIVATION_CHANNELS))
+
+
+@pytest.mark.parametrize("features", [0, 262, 300, 330])
+def test_other_feature_widths_are_refused(mocap_dir: Path, tmp_path: Path, features: int) -> None:
+    with pytest.raises(PhysmotionError, match="263 or 329") as err:
+        build_dataset(mocap_dir, tmp_path / "out", BuildConfig(features=features), progress=False)
+    assert "\n" not in str(err.value) and not (tmp_path / "out").exists()

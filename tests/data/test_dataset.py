@@ -92,3 +92,88 @@ def test_crop_shortens_windows_without_dropping_motions(built_dir: Path) -> None
     assert max(cropped[i]["length"] for i in range(len(cropped))) <= 120
     with pytest.raises(PhysmotionError, match="crop"):
         MotionDataset(built_dir, "train", crop=0)
+
+
+# --- muscle activations beside the motion (BioMoDiffuse's L_emg), on the 329-d build ---
+
+import os
+
+from physmotion.data.build import load_activations
+from physmotion.data.dataset import load_items
+
+
+def _window_start(feats: np.ndarray, motion: np.ndarray) -> int:
+    """Where the window ``motion`` sits in ``feats`` (found by content, not by the crop's rng)."""
+    starts = [s for s in range(len(feats) - len(motion) + 1) if np.array_equal(feats[s : s + len(motion)], motion)]
+    assert starts, "the window is not a slice of the motion"
+    return starts[0]
+
+
+@pytest.mark.parametrize("random_crop", [False, True])
+def test_items_carry_the_activations_of_their_window(built329_dir: Path, random_crop: bool) -> None:
+    ds = MotionDataset(built329_dir, "train", activations=True, normalize=False, crop=40, random_crop=random_crop,
+                       seed=5)  # fmt: skip
+    starts = set()
+    for i in range(0, len(ds), 9):
+        item = ds[i]
+        mid = ds.items[i].id
+        feats = np.load(built329_dir / "new_joint_vecs" / f"{mid}.npy")
+        acts = load_activations(built329_dir, mid)
+        assert item["motion"].shape == (item["length"], 329)
+        start = _window_start(feats, item["motion"].numpy())
+        starts.add(start)
+        assert item["activations"].dtype == torch.float32
+        np.testing.assert_array_equal(item["activations"].numpy(), acts[start : start + item["length"]])
+    assert (starts == {0}) is (not random_crop)  # random crops do move the window
+
+
+def test_collate_pads_activations(built329_dir: Path) -> None:
+    ds = MotionDataset(built329_dir, "train", activations=True, crop=120)
+    items = [ds[i] for i in range(8)]
+    assert len({it["length"] for it in items}) > 1
+    batch = collate(items)
+    width = int(batch["lengths"].max())
+    assert batch["activations"].shape == (8, width, 8) and batch["motion"].shape == (8, width, 329)
+    for i, it in enumerate(items):
+        n = it["length"]
+        assert torch.equal(batch["activations"][i, :n], it["activations"])
+        assert torch.all(batch["activations"][i, n:] == 0)
+    plain = MotionDataset(built329_dir, "train", crop=120)  # without activations=True: none
+    assert "activations" not in plain[0] and "activations" not in collate([plain[i] for i in range(3)])
+
+
+def test_timed_captions_take_the_activations_of_their_span(built329_dir: Path, tmp_path: Path) -> None:
+    root = tmp_path / "HumanML3D"
+    for sub in ("new_joint_vecs", "texts", "activations"):
+        (root / sub).mkdir(parents=True)
+    paths = sorted((built329_dir / "new_joint_vecs").glob("*.npy"))
+    src = next(p.stem for p in paths if np.load(p).shape[0] >= 150)
+    feats = np.load(built329_dir / "new_joint_vecs" / f"{src}.npy")
+    acts = load_activations(built329_dir, src)
+    np.save(root / "new_joint_vecs" / "000001.npy", feats)
+    np.save(root / "activations" / "000001.npy", acts)
+    for name in ("Mean.npy", "Std.npy"):
+        shutil.copy(built329_dir / name, root / name)
+    (root / "texts" / "000001.txt").write_text("a person walks.#a/DET#0.0#0.0\na person starts.#a/DET#1.0#5.0\n")
+    (root / "train.txt").write_text("000001\n")
+    by_id = {item.id: item for item in load_items(root, "train", activations=True)}
+    np.testing.assert_array_equal(by_id["000001"].activations, acts)
+    np.testing.assert_array_equal(by_id["000001#1"].activations, acts[20:100])
+    np.testing.assert_array_equal(by_id["000001#1"].features, feats[20:100])
+    assert all(item.activations is None for item in load_items(root, "train"))
+    np.save(root / "activations" / "000001.npy", acts[:-3])  # a stale cache: another length
+    with pytest.raises(PhysmotionError, match="frames") as err:
+        load_items(root, "train", activations=True)
+    assert "\n" not in str(err.value)
+
+
+def test_missing_activations_are_a_one_line_error(built329_dir: Path, tmp_path: Path) -> None:
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    for entry in built329_dir.iterdir():
+        if entry.name != "activations":
+            os.symlink(entry, bare / entry.name)
+    assert len(MotionDataset(bare, "val")) > 0  # the build is fine without activations=True
+    with pytest.raises(PhysmotionError, match="activation") as err:
+        MotionDataset(bare, "val", activations=True)
+    assert "\n" not in str(err.value)

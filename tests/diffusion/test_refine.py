@@ -104,3 +104,60 @@ def test_cli_writes_licence_and_refuses_missing(tmp_path, clean):
     assert not (tmp_path / "x.npz").exists()
     res = run("refine", src, "-o", tmp_path / "y.npz", "--strength", "0")
     assert res.returncode != 0 and not (tmp_path / "y.npz").exists()
+
+
+# --- physics guidance in refinement (a BioMoDiffuse model: arch "biomo", 329-d features) ---
+
+import copy
+
+import torch
+
+_FAST = {"strength": 0.2, "steps": 10}
+
+
+def test_refine_with_a_biomo_model_is_deterministic(tiny_biomo, noisy):
+    out = refine(tiny_biomo, noisy, 20, RefineConfig(**_FAST))
+    assert out.shape == noisy.shape and out.dtype == np.float32 and np.all(np.isfinite(out))
+    np.testing.assert_array_equal(out, refine(tiny_biomo, noisy, 20, RefineConfig(**_FAST)))
+    # unset, the physics weight is the model's sampling default (1); another weight, another motion
+    np.testing.assert_array_equal(out, refine(tiny_biomo, noisy, 20, RefineConfig(**_FAST, phys_scale=1.0)))
+    assert not np.allclose(out, refine(tiny_biomo, noisy, 20, RefineConfig(**_FAST, phys_scale=0.0)), atol=1e-5)
+
+
+def test_refine_without_physics_does_not_run_the_physical_network(tiny_biomo, noisy):
+    cfg = RefineConfig(**_FAST, phys_scale=0.0, text="a person walks")
+    before = refine(tiny_biomo, noisy, 20, cfg)
+    other = copy.deepcopy(tiny_biomo)
+    with torch.no_grad():
+        for p in other.net.physics.parameters():
+            p.mul_(-3.0)
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the physical network ran")
+
+    other.net.physics.forward = refuse
+    np.testing.assert_array_equal(refine(other, noisy, 20, cfg), before)
+    with pytest.raises(AssertionError, match="physical network ran"):
+        refine(other, noisy, 20, RefineConfig(**_FAST, phys_scale=0.5))
+
+
+def test_refine_phys_scale_needs_a_biomo_model(tiny_model, tiny_biomo, noisy):
+    with pytest.raises(PhysmotionError, match="biomo") as err:
+        refine(tiny_model, noisy, 20, RefineConfig(**_FAST, phys_scale=1.0))
+    assert "\n" not in str(err.value)
+    for bad in (-1.0, float("nan")):
+        with pytest.raises(PhysmotionError, match="phys_scale"):
+            refine(tiny_biomo, noisy, 20, RefineConfig(**_FAST, phys_scale=bad))
+
+
+def test_cli_refine_phys_scale(tmp_path, clean, tiny_biomo_dir):
+    src = tmp_path / "in.npz"
+    Motion(joints=clean[:60].astype(np.float32), fps=20, licence_tag="").save(src)
+    res = run("refine", src, "-o", tmp_path / "x.npz", "--phys-scale", "1")  # the shipped model: no physics
+    assert res.returncode != 0 and "Traceback" not in res.stderr
+    assert res.stderr.strip().startswith("error:") and len(res.stderr.strip().splitlines()) == 1
+    assert "biomo" in res.stderr and not (tmp_path / "x.npz").exists()
+    res = run("refine", src, "-o", tmp_path / "y.npz", "--model", tiny_biomo_dir, "--phys-scale", "0.5",
+              "--strength", "0.2", "--steps", "10")  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    assert Motion.load(tmp_path / "y.npz").joints.shape == (60, 22, 3)

@@ -110,3 +110,188 @@ def test_bf16_is_used_only_where_the_hardware_has_it(built_dir: Path, tmp_path: 
     assert bf16_helps("cpu") == bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
     train_denoiser(tiny_config(built_dir, tmp_path / "off", steps=1, bf16=False), progress=False)
     assert json.loads((tmp_path / "off" / "config.json").read_text())["info"]["train"]["bf16"] is False
+
+
+# --- BioMoDiffuse: the 329-d loss terms, arch "biomo" on the 329-d build with its activations ---
+
+import os
+
+from physmotion.diffusion.backbone import DenoiserConfig
+from physmotion.diffusion.denoiser import build_denoiser
+from physmotion.diffusion.physnet import BioMoDenoiser
+from physmotion.diffusion.train import LOSS_FILE, loss_terms
+from tests.conftest import tiny_biomo_config
+
+
+def _mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> float:
+    """Mean squared error over the valid frames' entries, in numpy."""
+    p, q, m = pred.detach().double().numpy(), target.double().numpy(), mask.numpy()
+    return float(((p - q) ** 2)[m].mean())
+
+
+def _batch(dim: int, seed: int = 0):
+    gen = torch.Generator().manual_seed(seed)
+    pred, x0 = torch.randn(3, 20, dim, generator=gen), torch.randn(3, 20, dim, generator=gen)
+    mask = torch.arange(20)[None] < torch.tensor([20, 12, 5])[:, None]
+    return pred, x0, mask
+
+
+def _biomo_net(root: Path) -> BioMoDenoiser:
+    net = BioMoDenoiser(DenoiserConfig(arch="biomo", feature_dim=329, d_model=32, layers=2, phys_hidden=32))
+    mean, std = np.load(root / "Mean.npy"), np.load(root / "Std.npy")
+    net.physics.set_feature_stats(torch.from_numpy(mean), torch.from_numpy(std))
+    return net
+
+
+def _rows(path: Path) -> tuple[list[str], list[list[float]]]:
+    lines = path.read_text().splitlines()
+    return lines[0].split(","), [[float(v) for v in line.split(",")] for line in lines[1:]]
+
+
+def test_loss_terms_of_263_and_329_features() -> None:
+    pred, x0, mask = _batch(263)
+    parts = loss_terms(pred, x0, mask)
+    assert set(parts) == {"diffusion"}
+    assert float(parts["diffusion"]) == pytest.approx(_mse(pred, x0, mask), rel=1e-5)
+    pred, x0, mask = _batch(329)
+    pred[2, 5:] = 1e3  # padding of the last row: ignored
+    parts = loss_terms(pred, x0, mask)
+    assert set(parts) == {"diffusion", "accel"}
+    assert float(parts["diffusion"]) == pytest.approx(_mse(pred[..., :263], x0[..., :263], mask), rel=1e-5)
+    assert float(parts["accel"]) == pytest.approx(_mse(pred[..., 263:], x0[..., 263:], mask), rel=1e-5)
+    pred[..., 263:] = x0[..., 263:]  # exact joint accelerations: no L_accel, L_diffusion unchanged
+    again = loss_terms(pred, x0, mask)
+    assert float(again["accel"]) == 0.0 and float(again["diffusion"]) == pytest.approx(float(parts["diffusion"]))
+
+
+def test_loss_terms_of_the_physical_network(built329_dir: Path) -> None:
+    """L_phys compares the network's m/s^2 with the data's joint_acc in the data's units; L_emg its
+    activations with the cached ones."""
+    net = _biomo_net(built329_dir)
+    pred, x0, mask = _batch(329, seed=1)
+    gen = torch.Generator().manual_seed(2)
+    acc = torch.randn(3, 20, 22, 3, generator=gen) * 10
+    u, acts = torch.rand(3, 20, 8, generator=gen), torch.rand(3, 20, 8, generator=gen)
+    parts = loss_terms(pred, x0, mask, acc, u, acts, net)
+    assert set(parts) == {"diffusion", "accel", "phys", "emg"}
+    assert float(parts["phys"]) == pytest.approx(_mse(net.physics.to_features(acc), x0[..., 263:], mask), rel=1e-5)
+    assert float(parts["emg"]) == pytest.approx(_mse(u, acts, mask), rel=1e-5)
+    assert set(loss_terms(pred, x0, mask, acc, u, None, net)) == {"diffusion", "accel", "phys"}
+    assert set(loss_terms(pred, x0, mask, None, None, acts, net)) == {"diffusion", "accel"}
+    # the true accelerations in m/s^2 (joint_acc x fps^2) and the true activations give zero
+    mean, std = np.load(built329_dir / "Mean.npy")[263:], np.load(built329_dir / "Std.npy")[263:]
+    true_acc = ((x0[..., 263:].double().numpy() * std + mean) * 400.0).reshape(3, 20, 22, 3)
+    exact = loss_terms(pred, x0, mask, torch.from_numpy(true_acc).float(), acts, acts, net)
+    assert float(exact["phys"]) < 1e-8 and float(exact["emg"]) == 0.0
+    per_frame = loss_terms(pred, x0, mask, torch.from_numpy(true_acc / 400.0).float(), u, acts, net)
+    assert float(per_frame["phys"]) > 1e-3  # metres per frame^2 are not m/s^2
+
+
+@pytest.mark.slow
+def test_biomo_loss_goes_down_on_the_329_build(built329_dir: Path, tmp_path: Path) -> None:
+    cfg = tiny_biomo_config(built329_dir, tmp_path / "run", steps=40, log_every=10)
+    result = train_denoiser(cfg, progress=False)
+    assert len(result.terms) == len(result.losses) == 4
+    first, last = result.losses[0][1], result.losses[-1][1]
+    assert last < 0.7 * first, result.losses
+    for name in ("phys", "emg"):
+        assert result.terms[-1][name] < 0.8 * result.terms[0][name], result.terms
+    header, rows = _rows(tmp_path / "run" / LOSS_FILE)
+    assert header == ["step", "loss", "diffusion", "accel", "phys", "emg"] and len(rows) == 4
+    assert [r[0] for r in rows] == [10, 20, 30, 40]
+
+
+def test_loss_csv_columns_and_weights(built329_dir: Path, tiny_model_dir: Path, tmp_path: Path) -> None:
+    """loss.csv: one column per loss term for 329-d runs, the total their weighted sum; 263-d: step,loss."""
+    cfg = tiny_biomo_config(built329_dir, tmp_path / "bio", steps=4, log_every=2, accel_weight=0.5, phys_weight=2.0,
+                            emg_weight=3.0)  # fmt: skip
+    result = train_denoiser(cfg, progress=False)
+    header, rows = _rows(tmp_path / "bio" / LOSS_FILE)
+    assert header == ["step", "loss", "diffusion", "accel", "phys", "emg"] and len(rows) == 2
+    for (step, loss, diffusion, accel, phys, emg), terms in zip(rows, result.terms):
+        assert loss == pytest.approx(diffusion + 0.5 * accel + 2.0 * phys + 3.0 * emg, abs=2e-5)
+        assert emg == pytest.approx(terms["emg"], abs=1e-6)
+    # a 329-d UNet: L_diffusion + L_accel only
+    unet = replace(cfg, out=str(tmp_path / "unet"), denoiser=replace(cfg.denoiser, arch="unet"))
+    train_denoiser(unet, progress=False)
+    header, rows = _rows(tmp_path / "unet" / LOSS_FILE)
+    assert header == ["step", "loss", "diffusion", "accel"]
+    assert all(loss == pytest.approx(diffusion + 0.5 * accel, abs=2e-5) for _, loss, diffusion, accel in rows)
+    assert (tiny_model_dir / LOSS_FILE).read_text().splitlines()[0] == "step,loss"
+    # the resumable state holds the data's joint_acc statistics in the physical network
+    state = torch.load(tmp_path / "bio" / STATE_FILE, weights_only=False)
+    mean = torch.from_numpy(np.load(built329_dir / "Mean.npy"))
+    assert torch.equal(state["net"]["physics.acc_mean"], mean[263:329])
+
+
+def test_dropping_physics_always_leaves_the_physical_network_untrained(built329_dir: Path, tmp_path: Path) -> None:
+    """P_c = 1: the physical network never runs, so its weights stay at their initial values, L_phys and
+    L_emg never appear, and their weights change nothing."""
+    a = tiny_biomo_config(built329_dir, tmp_path / "a", steps=3, log_every=3, phys_drop=1.0)
+    b = tiny_biomo_config(built329_dir, tmp_path / "b", steps=3, log_every=3, phys_drop=1.0, phys_weight=5.0,
+                          emg_weight=0.0)  # fmt: skip
+    ra, rb = train_denoiser(a, progress=False), train_denoiser(b, progress=False)
+    assert ra.losses == rb.losses and set(ra.terms[0]) == {"diffusion", "accel"}
+    assert _rows(tmp_path / "a" / LOSS_FILE)[0] == ["step", "loss", "diffusion", "accel"]
+    sa = torch.load(tmp_path / "a" / STATE_FILE, weights_only=False)["net"]
+    sb = torch.load(tmp_path / "b" / STATE_FILE, weights_only=False)["net"]
+    torch.manual_seed(a.seed)
+    fresh = build_denoiser(replace(a.denoiser, text_dim=384)).state_dict()
+    for k in sa:
+        assert torch.equal(sa[k], sb[k]), k
+        if k.startswith("physics.") and "acc_" not in k:
+            assert torch.equal(sa[k], fresh[k]), k
+    assert not torch.equal(sa["unet.in_conv.weight"], fresh["unet.in_conv.weight"])  # the UNet did train
+
+
+def test_biomo_resume_continues_exactly(built329_dir: Path, tmp_path: Path) -> None:
+    """4 steps in one go == 2 steps, stop, resume to 4 (the P_c draws included), loss.csv too."""
+    whole, split = tmp_path / "whole", tmp_path / "split"
+    train_denoiser(tiny_biomo_config(built329_dir, whole, steps=4, log_every=2, phys_drop=0.5), progress=False)
+    train_denoiser(tiny_biomo_config(built329_dir, split, steps=2, log_every=2, phys_drop=0.5), progress=False)
+    train_denoiser(tiny_biomo_config(built329_dir, split, steps=4, log_every=2, phys_drop=0.5), resume=True,
+                   progress=False)  # fmt: skip
+    a = torch.load(whole / STATE_FILE, weights_only=False)
+    b = torch.load(split / STATE_FILE, weights_only=False)
+    assert a["step"] == b["step"] == 4
+    for k in a["net"]:
+        assert torch.equal(a["net"][k], b["net"][k]), k
+    assert (whole / LOSS_FILE).read_text() == (split / LOSS_FILE).read_text()
+
+
+def _without_activations(src: Path, dst: Path) -> Path:
+    """The build ``src`` without its activation cache (everything else linked in)."""
+    dst.mkdir()
+    for entry in src.iterdir():
+        if entry.name != "activations":
+            os.symlink(entry, dst / entry.name)
+    return dst
+
+
+def test_biomo_needs_the_329_build_with_activations(built_dir: Path, built329_dir: Path, tmp_path: Path) -> None:
+    with pytest.raises(PhysmotionError, match="329") as err:
+        train_denoiser(tiny_biomo_config(built_dir, tmp_path / "a"), progress=False)
+    assert "\n" not in str(err.value) and not (tmp_path / "a" / STATE_FILE).exists()
+    bare = _without_activations(built329_dir, tmp_path / "bare")
+    with pytest.raises(PhysmotionError, match="activations") as err:
+        train_denoiser(tiny_biomo_config(bare, tmp_path / "b"), progress=False)
+    assert "\n" not in str(err.value) and not (tmp_path / "b" / STATE_FILE).exists()
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_loss_csv_of_a_biomo_run_whose_log_windows_drop_the_physics(
+    built329_dir: Path, tmp_path: Path, seed: int
+) -> None:
+    """With small batches some log windows have every row's physical network dropped (P_c), so they
+    have no L_phys / L_emg. The run must still finish and write one loss.csv column set for the whole
+    run. (With batch 1, P_c 0.5 and a row per step: seed 1 has physics in the first window and not in a
+    later one, seed 3 none in the first.)"""
+    cfg = tiny_biomo_config(built329_dir, tmp_path / "run", steps=6, log_every=1, batch_size=1, phys_drop=0.5,
+                            seed=seed)  # fmt: skip
+    result = train_denoiser(cfg, progress=False)
+    present = [{"phys", "emg"} <= set(t) for t in result.terms]
+    assert any(present) and not all(present)  # the case this test is about
+    lines = (tmp_path / "run" / LOSS_FILE).read_text().splitlines()
+    assert lines[0] == "step,loss,diffusion,accel,phys,emg"
+    assert [int(line.split(",")[0]) for line in lines[1:]] == [1, 2, 3, 4, 5, 6]
+    assert all(line.count(",") == 5 for line in lines[1:])
