@@ -1,6 +1,6 @@
 """BioMoDiffuse's Table 5 as we can measure it: inversion refinement of jittery motion.
 
-    python scripts/refine_table.py --data data_build/mocap -o results/refine [--limit N]
+    python scripts/refine_table.py --data data_build/mocap -o results/refine [--limit N] [--model DIR]
 
 Test-split clips (``new_joints`` of the ids in test.txt, mirrored "M" copies left out) get the jitter a
 pose estimator makes: per-joint Gaussian noise of sigma 1, 2 and 4 cm and 5 % of the frames replaced by
@@ -29,6 +29,7 @@ from scipy.signal import butter, filtfilt
 from physmotion.conventions import FPS
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.refine import RefineConfig, refine
+from physmotion.diffusion.samplers import default_sampler
 from physmotion.metrics import physical_metrics
 from physmotion.motion import write_atomic
 from physmotion.physics.surface import HumanoidSurface, ground_on_surface
@@ -74,8 +75,8 @@ def test_ids(data: Path, limit: int | None) -> list[str]:
     return ids[:limit] if limit else ids
 
 
-def run_table(data: Path, limit: int | None, seed: int) -> tuple[list[dict], dict]:
-    model = MotionDiffusion.load()
+def run_table(data: Path, limit: int | None, seed: int, model_dir: Path | None = None) -> tuple[list[dict], dict]:
+    model = MotionDiffusion.load(model_dir)
     ids = test_ids(data, limit)
     rows: dict[str, list[dict[str, float]]] = {}
     clean_rows: list[dict[str, float]] = []
@@ -93,9 +94,13 @@ def run_table(data: Path, limit: int | None, seed: int) -> tuple[list[dict], dic
         print(f"[{n + 1}/{len(ids)}] {cid}", file=sys.stderr, flush=True)
     table = [{"setting": "clean", **_mean(clean_rows)}]
     table += [{"setting": k, **_mean(v)} for k, v in rows.items()]
+    arch = model.denoiser.arch
+    if arch == "biomo":
+        arch += f", physics guidance {default_sampler(model).phys_scale:g}"
+    name = "the shipped model" if model_dir is None else str(model_dir)
     meta = {"clips": len(ids), "ids": ids, "seed": seed, "sigmas_cm": list(SIGMAS_CM), "drop_share": DROP_SHARE,
             "strengths": list(STRENGTHS), "low_pass": f"Butterworth order 4, {CUTOFF_HZ:g} Hz, filtfilt",
-            "refine": "no caption, 50 DDIM steps, shipped model", "fps": FPS}  # fmt: skip
+            "refine": f"no caption, 50 DDIM steps, {name} ({arch})", "fps": FPS}  # fmt: skip
     return table, meta
 
 
@@ -124,9 +129,10 @@ def main() -> None:
     parser.add_argument("-o", "--out", type=Path, default=Path("results/refine"))
     parser.add_argument("--limit", type=int, default=None, help="at most this many clips (default all)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--model", type=Path, default=None, help="model folder (default: the shipped model)")
     args = parser.parse_args()
     t0 = time.time()
-    table, meta = run_table(args.data, args.limit, args.seed)
+    table, meta = run_table(args.data, args.limit, args.seed, args.model)
     meta["seconds"] = round(time.time() - t0, 1)
     md = to_markdown(table, meta)
     js = json.dumps({"meta": meta, "rows": table}, indent=2) + "\n"

@@ -78,6 +78,7 @@ class EvaluateConfig:
     mm_times: int = 10
     surface: str = "humanoid"
     seed: int = 0
+    real_row: bool = True  # False: skip the real-motion row (a caller that has it from another run)
     base: GenerateConfig = field(default_factory=GenerateConfig)
 
     @classmethod
@@ -156,8 +157,10 @@ def evaluate(
     total, done = cfg.repeats * len(items) * len(cfg.modes), 0
 
     rows: dict[str, dict[str, tuple[float, float]]] = {}
-    runs = [_real_run(evaluator, items, r, cfg, real_emb, text_emb) for r in range(cfg.repeats)]
-    rows[REAL] = _summarise(runs, None)
+    if cfg.real_row:
+        real_phys = _real_physical(items, cfg)  # the same in every repeat: measured once
+        runs = [_real_run(evaluator, items, r, cfg, real_emb, text_emb) | real_phys for r in range(cfg.repeats)]
+        rows[REAL] = _summarise(runs, None)
     for mode, gen_cfg in gen_configs.items():
         runs, per_text = [], []
         for r in range(cfg.repeats):
@@ -221,14 +224,16 @@ def _crop(features: np.ndarray, rng: np.random.Generator, unit: int = 4) -> np.n
 def _real_run(evaluator, items, r, cfg, real_emb, text_emb) -> dict[str, float]:
     rng = np.random.default_rng((cfg.seed, 2, r))
     crops = [_crop(it.features, rng) for it in items]
-    run = _scores(evaluator.encode_motions(crops), text_emb, real_emb, r, cfg)
+    return _scores(evaluator.encode_motions(crops), text_emb, real_emb, r, cfg)
+
+
+def _real_physical(items: list[MotionItem], cfg: EvaluateConfig) -> dict[str, float]:
+    """The physical metrics of the real motions (whole, not cropped)."""
     real = [recover_from_ric(it.features.astype(np.float64)) for it in items]
     if cfg.surface == "humanoid":  # the metrics' floor convention: grounded on the surface they measure
         real, bodies = (list(z) for z in zip(*(ground_on_surface(j) for j in real)))
-        run.update(_physical(real, metric_surface(cfg.surface, bodies)))
-    else:
-        run.update(_physical(real, metric_surface(cfg.surface)))
-    return run
+        return _physical(real, metric_surface(cfg.surface, bodies))
+    return _physical(real, metric_surface(cfg.surface))
 
 
 def _generate(model, captions, items, gen_cfg, batch, tick) -> tuple[list, list, float, dict[str, float]]:
