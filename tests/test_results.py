@@ -119,6 +119,19 @@ def new_prompts_quotes() -> list[str]:
             f"({100 * (1 - rows[0][PHYSDIFF]['tracked']):.0f} % fell)" for cat, rows in runs.items()]
 
 
+def biomodiffuse_quotes() -> list[str]:
+    """BioMoDiffuse's ablation (results/biomodiffuse.json): the baseline and the full model, and Table 6."""
+    result = _load("biomodiffuse.json")
+    rows, speed = result["rows"], result["speed"]
+    base, full = rows["UNet baseline (263-d)"], rows["+ physics guidance"]
+    return [
+        f"FID {base['FID'][0]:.3f} -> {full['FID'][0]:.3f}",
+        f"Phys-Err {base['phys_err'][0]:.1f} -> {full['phys_err'][0]:.1f} mm",
+        f"better on {len(result['full_vs_baseline']['wins'])} of 6",
+        "speed " + " / ".join(f"{speed[s]['speed'][0]:.2f}" for s in ("0.5", "1", "1.5")) + " m/s",
+    ]
+
+
 QUOTES = {  # which doc quotes which result file
     ("README", "evaluate"): evaluate_quotes,
     ("README", "bench"): bench_quotes,
@@ -131,6 +144,8 @@ QUOTES = {  # which doc quotes which result file
     ("README", "dynamic"): dynamic_quotes,
     ("results", "dynamic"): dynamic_quotes,
     ("results", "new prompts"): new_prompts_quotes,
+    ("README", "biomodiffuse"): biomodiffuse_quotes,
+    ("results", "biomodiffuse"): biomodiffuse_quotes,
 }
 
 
@@ -138,7 +153,7 @@ def _section(text: str, source: str) -> str:
     """The paragraph(s) of a doc that quote ``source``: those naming its file or command."""
     files = {"evaluate": "evaluate_default", "bench": "physdiff_quality", "schedule": "schedule_study",
              "morph": "results/morph.md", "dynamic": "projection_dynamic",
-             "new prompts": "new_prompts_default"}
+             "new prompts": "new_prompts_default", "biomodiffuse": "results/biomodiffuse"}
     marker = files[source]
     return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
 
