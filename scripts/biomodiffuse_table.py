@@ -5,7 +5,7 @@
 
 ``--data`` is the 263-d build (``physmotion data build``), ``--data329`` the 329-d one with activations
 (``physmotion data build --features 329 --activations``); both come from the same mocap, so their splits
-are the same. Trains the three models of :data:`physmotion.eval.ablation.ROWS` into ``--runs`` (a run
+are the same. Trains the four models of :data:`physmotion.eval.ablation.RUNS` into ``--runs`` (a run
 already there at ``--steps`` is reused, an unfinished one resumed): the same UNet width, steps, batch,
 crop and seed for all. Then evaluates each row on the 263-d build's test split with the shipped
 evaluator, and the full model at each speed of :data:`~physmotion.eval.ablation.SPEEDS`, and writes
@@ -27,6 +27,7 @@ from physmotion.eval.ablation import (
     GENERATION,
     PHYSICAL,
     ROWS,
+    RUNS,
     SPEED_COLUMNS,
     SPEEDS,
     WIN_COLUMNS,
@@ -38,18 +39,16 @@ from physmotion.eval.ablation import (
 from physmotion.eval.evaluator import Evaluator
 from physmotion.motion import write_atomic
 
-ARCH = {"unet263": "unet", "unet329": "unet", "biomo": "biomo"}
-
-
 def train_runs(args: argparse.Namespace) -> dict[str, MotionDiffusion]:
     """Train (or reuse, or resume) every run the rows need; returns the loaded models."""
     models = {}
     for run in dict.fromkeys(r.run for r in ROWS):
         out = Path(args.runs) / run
-        data = args.data if run == "unet263" else args.data329
-        den = DenoiserConfig(arch=ARCH[run], d_model=args.d_model, layers=args.layers)
+        spec = RUNS[run]
+        data = args.data if spec["features"] == 263 else args.data329
+        den = DenoiserConfig(arch=spec["arch"], d_model=args.d_model, layers=args.layers)
         cfg = TrainConfig(data=str(data), out=str(out), denoiser=den, crop=args.crop, batch_size=args.batch,
-                          steps=args.steps, seed=args.seed)  # fmt: skip
+                          steps=args.steps, seed=args.seed, phys_drop=spec["phys_drop"])  # fmt: skip
         done = (out / "config.json").is_file() and MotionDiffusion.load(out).info.get("steps") == args.steps
         if not done:
             print(f"training {run} to step {args.steps} in {out}", file=sys.stderr)
@@ -149,8 +148,8 @@ def _markdown(result: dict) -> str:
         "no projection.",
         "",
         "Parameters: " + ", ".join(f"{run} {m['parameters'] / 1e6:.2f} M" for run, m in meta["models"].items())
-        + ". Rows 3 and 4 sample the same model (trained with P_c = 10 %). The Table 6 speed S scales the "
-        "physical network's accelerations before they enter the UNet.",
+        + ". \"+ PhysNet\" is trained without P_c; the last two rows sample one model trained with P_c = 10 %. "
+        "The Table 6 speed S scales the physical network's accelerations before they enter the UNet.",
         "",
         "## Table 3: generation",
         "",

@@ -2,9 +2,9 @@
 
 BioMoDiffuse Sec. 3.5, Eq. 10-11: a motion x_0 (e.g. a pose estimator's jittery output) is mapped by
 deterministic DDIM inversion to x_t at t = strength * T, and the deterministic DDIM sampler (eta 0, with
-classifier-free guidance) brings it back to a refined x_0. The paper also steers this denoising with its
-physics network's gradients; that network does not exist here yet, so :func:`refine` is the inversion
-part only.
+classifier-free guidance) brings it back to a refined x_0. With a BioMoDiffuse model (``arch="biomo"``)
+both directions also use its physics guidance (:func:`physmotion.diffusion.samplers.guided_x0`), as the
+paper's "forward diffusion with our physics guidance"; other models have no physical network.
 
 The schedules mirror :func:`physmotion.diffusion.schedule.sampling_scheduler`'s ``ddim`` (cosine betas,
 x0 prediction, trailing spacing, alpha 1 at the end): inversion runs on diffusers' ``DDIMInverseScheduler``

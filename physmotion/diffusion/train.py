@@ -53,6 +53,9 @@ if TYPE_CHECKING:
     from torch.utils.data import Dataset
 
 STATE_FILE = "train_state.pt"
+ACTIVATIONS_ORIGIN = ("no EMG: 8 channels of inverse-dynamics joint effort of the physmotion humanoid "
+                      "(|torque| / actuator limit, physmotion.physics.activations), cached by "
+                      "`physmotion data build --activations`")  # fmt: skip
 LOSS_FILE = "loss.csv"
 
 
@@ -307,6 +310,8 @@ def _save(cfg: TrainConfig, out: Path, net: torch.nn.Module, opt, ema, step: int
     build_info = json.loads(info_path.read_text()) if info_path.is_file() else {}
     info = {"data": str(cfg.data), "licence_tags": build_info.get("licence_tags", ["unknown"]),
             "train_items": len(dataset), "steps": step, "train": _summary(cfg)} | (extra or {})  # fmt: skip
+    if cfg.denoiser.arch == "biomo":  # what a model card must say about the muscle term
+        info["muscle_activations"] = ACTIVATIONS_ORIGIN
     MotionDiffusion(ema_net.eval(), cfg.denoiser, cfg.diffusion, dataset.normalizer, cfg.text_encoder, info).save(out)
     # A window where P_c dropped the physical network on every row has no phys/emg: the cell stays empty.
     names = list(dict.fromkeys(n for t in terms for n in t)) if terms and len(terms) == len(losses) else []

@@ -295,3 +295,11 @@ def test_loss_csv_of_a_biomo_run_whose_log_windows_drop_the_physics(
     assert lines[0] == "step,loss,diffusion,accel,phys,emg"
     assert [int(line.split(",")[0]) for line in lines[1:]] == [1, 2, 3, 4, 5, 6]
     assert all(line.count(",") == 5 for line in lines[1:])
+
+
+def test_a_biomo_model_says_where_its_activations_come_from(tiny_biomo, tiny_model) -> None:
+    """The model's info carries the muscle term's origin (no EMG), for its model card."""
+    from physmotion.diffusion.train import ACTIVATIONS_ORIGIN
+
+    assert tiny_biomo.info["muscle_activations"] == ACTIVATIONS_ORIGIN and "no EMG" in ACTIVATIONS_ORIGIN
+    assert "muscle_activations" not in tiny_model.info

@@ -4,15 +4,18 @@ import numpy as np
 import pytest
 
 from physmotion.diffusion.samplers import BIOMO_SAMPLER
-from physmotion.eval.ablation import ROWS, evaluate_row, markdown_table, separated, wins
+from physmotion.eval.ablation import ROWS, RUNS, evaluate_row, markdown_table, separated, wins
 
 
-def test_rows_are_the_papers_and_share_the_physics_model():
+def test_rows_are_the_papers_and_guidance_samples_the_dropout_model():
     assert [r.name for r in ROWS] == ["UNet baseline (263-d)", "+ L_accel (329-d)", "+ PhysNet",
-                                      "+ physics guidance"]  # fmt: skip
-    assert ROWS[2].run == ROWS[3].run == "biomo"
-    assert ROWS[2].sampler().phys_scale is None  # the physical network on every pass
-    assert ROWS[3].sampler().phys_scale == BIOMO_SAMPLER.phys_scale
+                                      "+ PhysNet (P_c 10 %)", "+ physics guidance"]  # fmt: skip
+    assert [RUNS[r.run]["arch"] for r in ROWS] == ["unet", "unet", "biomo", "biomo", "biomo"]
+    assert [RUNS[r.run]["features"] for r in ROWS] == [263, 329, 329, 329, 329]
+    assert RUNS[ROWS[2].run]["phys_drop"] == 0.0  # the paper's "+ PhysNet": no dropout, no guidance
+    assert ROWS[3].run == ROWS[4].run and RUNS[ROWS[4].run]["phys_drop"] == 0.1  # guidance needs P_c
+    assert ROWS[2].sampler().phys_scale is None and ROWS[3].sampler().phys_scale is None
+    assert ROWS[4].sampler().phys_scale == BIOMO_SAMPLER.phys_scale
     assert {r.sampler().sampler for r in ROWS} == {"dpmpp-sde"} and {r.sampler().steps for r in ROWS} == {10}
 
 
@@ -44,7 +47,7 @@ def test_a_biomo_row_is_measured_without_the_real_row(tiny_biomo, tiny_evaluator
     """A 329-d model is measured on the 263-d build's split; the real row is left out when asked."""
     from dataclasses import replace
 
-    sampler = replace(ROWS[3].sampler(), steps=3)
+    sampler = replace(ROWS[-1].sampler(), steps=3)
     row, real = evaluate_row(tiny_biomo, tiny_evaluator, built_dir, sampler, repeats=1, real_row=False)
     assert real is None
     for key in ("FID", "R@3", "vc", "ac", "speed", "smoothness", "float_ratio", "skate_ratio", "phys_err"):
