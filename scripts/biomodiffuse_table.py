@@ -39,6 +39,7 @@ from physmotion.eval.ablation import (
 from physmotion.eval.evaluator import Evaluator
 from physmotion.motion import write_atomic
 
+
 def train_runs(args: argparse.Namespace) -> dict[str, MotionDiffusion]:
     """Train (or reuse, or resume) every run the rows need; returns the loaded models."""
     models = {}
@@ -66,7 +67,9 @@ def _measured(args, run: str, label: str, sampler, repeats: int, evaluator, mode
     cache = json.loads(path.read_text()) if path.is_file() else {}
     if key not in cache:
         print(f"evaluating {label}", file=sys.stderr)
-        row, real = evaluate_row(models[run], evaluator, args.data, sampler, repeats, args.seed, real_row=real_row)
+        row, real = evaluate_row(
+            models[run], evaluator, args.data, sampler, repeats, args.seed, real_row=real_row
+        )
         cache[key] = {"row": row, "real": real}
         write_atomic(path, lambda f: f.write(json.dumps(cache, indent=1)), "w")
     return _as_row(cache[key]["row"]), _as_row(cache[key]["real"])
@@ -111,20 +114,34 @@ def main() -> None:
     baseline, last = rows[ROWS[0].name], rows[full.name]
     result = {
         "meta": {
-            "data": args.data, "data329": args.data329, "steps": args.steps, "d_model": args.d_model,
-            "layers": args.layers, "crop": args.crop, "batch": args.batch, "repeats": args.repeats,
+            "data": args.data,
+            "data329": args.data329,
+            "steps": args.steps,
+            "d_model": args.d_model,
+            "layers": args.layers,
+            "crop": args.crop,
+            "batch": args.batch,
+            "repeats": args.repeats,
             "speed_repeats": args.speed_repeats,
-            "seed": args.seed, "split": "test", "sampler": asdict(full.sampler()),
-            "models": {run: {"parameters": sum(p.numel() for p in m.net.parameters()),
-                             "train_seconds": m.info.get("train_seconds"), "licence": m.licence_tag}
-                       for run, m in models.items()},
-        },  # fmt: skip
+            "seed": args.seed,
+            "split": "test",
+            "sampler": asdict(full.sampler()),
+            "models": {
+                run: {
+                    "parameters": sum(p.numel() for p in m.net.parameters()),
+                    "train_seconds": m.info.get("train_seconds"),
+                    "licence": m.licence_tag,
+                }
+                for run, m in models.items()
+            },
+        },
         "rows": {"real": real, **rows},
         "speed": speed_rows,
         "full_vs_baseline": {
             "separated": separated(baseline, last, GENERATION + PHYSICAL),
             "wins": wins(baseline, last, real),
-            "fid_within_or_better": last["FID"][0] - last["FID"][1] <= baseline["FID"][0] + baseline["FID"][1],
+            "fid_within_or_better": last["FID"][0] - last["FID"][1]
+            <= baseline["FID"][0] + baseline["FID"][1],
         },
     }
     out = Path(args.out)
@@ -147,8 +164,9 @@ def _markdown(result: dict) -> str:
         f"{meta['sampler']['sampler']}, {meta['sampler']['steps']} steps, CFG {meta['sampler']['cfg_scale']:g}; "
         "no projection.",
         "",
-        "Parameters: " + ", ".join(f"{run} {m['parameters'] / 1e6:.2f} M" for run, m in meta["models"].items())
-        + ". \"+ PhysNet\" is trained without P_c; the last two rows sample one model trained with P_c = 10 %. "
+        "Parameters: "
+        + ", ".join(f"{run} {m['parameters'] / 1e6:.2f} M" for run, m in meta["models"].items())
+        + '. "+ PhysNet" is trained without P_c; the last two rows sample one model trained with P_c = 10 %. '
         "The Table 6 speed S scales the physical network's accelerations before they enter the UNet.",
         "",
         "## Table 3: generation",

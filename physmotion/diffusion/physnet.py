@@ -151,7 +151,9 @@ class BioMoDenoiser(nn.Module):
     def __init__(self, config: DenoiserConfig) -> None:
         super().__init__()
         if config.feature_dim != FEATURE_DIM_BIOMECH:
-            raise ValueError(f"the biomo denoiser needs {FEATURE_DIM_BIOMECH}-d features, got {config.feature_dim}")
+            raise ValueError(
+                f"the biomo denoiser needs {FEATURE_DIM_BIOMECH}-d features, got {config.feature_dim}"
+            )
         self.config = config
         self.unet = UNetDenoiser(config, extra_channels=ACCEL_DIM + 1)
         self.physics = PhysicalNetwork(config.feature_dim, config.phys_hidden)

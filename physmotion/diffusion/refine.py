@@ -122,7 +122,8 @@ class _Guide:
 
     def __call__(self, x: torch.Tensor, t: int, scale: float) -> torch.Tensor:
         tt = torch.full((1,), int(t), device=self.device)
-        return guided_x0(self.model.net, x, tt, self.enc, self.mask, scale, with_text=bool(self.text) and scale != 0.0,
+        with_text = bool(self.text) and scale != 0.0
+        return guided_x0(self.model.net, x, tt, self.enc, self.mask, scale, with_text=with_text,
                          phys_scale=self.phys_scale)  # fmt: skip
 
 

@@ -107,10 +107,11 @@ def guided_x0(
     drop_text = torch.tensor([v[0] for v in passes.values() for _ in range(b)], device=x.device)
     kwargs = {}
     if biomo:
-        kwargs = {"drop_phys": torch.tensor([v[1] for v in passes.values() for _ in range(b)], device=x.device),
-                  "speed": speed}  # fmt: skip
+        drop_phys = torch.tensor([v[1] for v in passes.values() for _ in range(b)], device=x.device)
+        kwargs = {"drop_phys": drop_phys, "speed": speed}
     texts = TextFeatures(text.tokens.repeat(n, 1, 1), text.mask.repeat(n, 1), text.pooled.repeat(n, 1))
-    out = dict(zip(passes, net(x.repeat(n, 1, 1), t.repeat(n), texts, mask.repeat(n, 1), drop_text, **kwargs).chunk(n)))
+    pred = net(x.repeat(n, 1, 1), t.repeat(n), texts, mask.repeat(n, 1), drop_text, **kwargs)
+    out = dict(zip(passes, pred.chunk(n)))
     x0 = out["u"] + cfg_scale * (out["c"] - out["u"]) if with_text else out["u"]
     if guided:
         x0 = x0 + phys_scale * (out["p"] - out["c" if with_text else "u"])
@@ -170,7 +171,8 @@ def sample(
     timesteps = sched.timesteps
     for i, t in enumerate(timesteps):
         tt = torch.full((b,), int(t), device=device)
-        x0 = guided_x0(model.net, x, tt, text, mask, cfg.cfg_scale, phys_scale=cfg.phys_scale, speed=cfg.speed)
+        x0 = guided_x0(model.net, x, tt, text, mask, cfg.cfg_scale, phys_scale=cfg.phys_scale,
+                       speed=cfg.speed)  # fmt: skip
         if hook is not None and i in hook_at:
             x0 = hook(x0, list(lengths)).to(x0)
         kwargs = {"eta": cfg.eta} if cfg.sampler == "ddim" else {}

@@ -173,7 +173,8 @@ def train_denoiser(
     torch.manual_seed(cfg.seed)
     net = build_denoiser(cfg.denoiser)
     if biomo:
-        net.physics.set_feature_stats(torch.from_numpy(dataset.normalizer.mean), torch.from_numpy(dataset.normalizer.std))
+        stats = dataset.normalizer
+        net.physics.set_feature_stats(torch.from_numpy(stats.mean), torch.from_numpy(stats.std))
     if init is not None:
         net.load_state_dict(init.net.state_dict())
     opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
@@ -220,7 +221,8 @@ def train_denoiser(
             group["lr"] = warmup_lr(cfg.lr, cfg.warmup, step)
         with accel.autocast():
             if biomo:
-                pred, acc, u = net(xt, t.to(accel.device), text, mask, drop.to(accel.device), drop_phys, physics=True)
+                pred, acc, u = net(xt, t.to(accel.device), text, mask, drop.to(accel.device), drop_phys,
+                                   physics=True)  # fmt: skip
             else:
                 pred, acc, u = net(xt, t.to(accel.device), text, mask, drop.to(accel.device)), None, None
         parts = loss_terms(pred.float(), x0, mask, acc, u, batch.get("activations"), accel.unwrap_model(net))

@@ -78,7 +78,9 @@ def test_woodbury_solve_equals_the_dense_solve() -> None:
         d32, v32 = net.inertia(torch.randn(2, 9, HIDDEN, generator=gen))
     b32 = torch.randn(2, 9, ACCEL_DIM, generator=gen)
     x32 = PhysicalNetwork.solve(d32, v32, b32)
-    ref = torch.linalg.solve(PhysicalNetwork.inertia_matrix(d32, v32).double(), b32.double()[..., None])[..., 0]
+    ref = torch.linalg.solve(PhysicalNetwork.inertia_matrix(d32, v32).double(), b32.double()[..., None])[
+        ..., 0
+    ]
     torch.testing.assert_close(x32.double(), ref, rtol=1e-3, atol=1e-3 * float(ref.abs().max()))
 
 
