@@ -71,7 +71,7 @@ def load_items(
     """Every usable (motion, captions) entry of a split, with HumanML3D's length filter.
 
     activations: also load each motion's cached muscle activations (``data build --activations``)."""
-    from physmotion.data.build import load_activations
+    from physmotion.data.build import load_activations  # here: build imports MuJoCo, which few callers need
 
     root = Path(root)
     limit = max_frames + 4  # HumanML3D keeps motions of fewer than 200 frames for max length 196

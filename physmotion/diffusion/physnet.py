@@ -175,8 +175,15 @@ class BioMoDenoiser(nn.Module):
         acc = u = None
         extra = torch.zeros(*x.shape[:2], ACCEL_DIM + 1, dtype=x.dtype, device=x.device)
         if keep.any():
-            acc, u = self.physics(x, t, mask)
-            present = torch.ones_like(extra[..., :1])
-            extra = torch.cat([self.physics.to_features(acc * speed), present], dim=-1) * keep[:, None, None]
+            # Training runs the network on every row (its output feeds L_phys even where P_c drops it from
+            # the UNet's input); sampling only on the rows that use it (one pass in three under guidance).
+            rows = slice(None) if physics else keep
+            acc, u = self.physics(x[rows], t[rows], mask[rows])
+            feats = self.physics.to_features(acc * speed)
+            feats = torch.cat([feats, torch.ones_like(feats[..., :1])], dim=-1)
+            if physics:
+                extra = feats * keep[:, None, None]
+            else:
+                extra[keep] = feats.to(extra.dtype)
         x0 = self.unet(x, t, text, mask, drop_text, extra=extra)
         return (x0, acc, u) if physics else x0

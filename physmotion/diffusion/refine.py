@@ -53,9 +53,7 @@ class RefineConfig:
             raise PhysmotionError(f"strength must be in (0, 1], got {self.strength:g}")
         if not 1 <= self.steps <= 1000:
             raise PhysmotionError(f"steps must be between 1 and 1000, got {self.steps}")
-        if not np.isfinite(self.cfg_scale):
-            raise PhysmotionError(f"cfg_scale must be a finite number, got {self.cfg_scale}")
-        SamplerConfig(cfg_scale=self.cfg_scale, phys_scale=self.phys_scale).check()
+        SamplerConfig(cfg_scale=self.cfg_scale, phys_scale=self.phys_scale).check()  # the guidance scales
 
     @property
     def inverted_steps(self) -> int:
