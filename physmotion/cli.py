@@ -279,12 +279,15 @@ def metrics(
 def refine_cmd(
     path: Path = typer.Argument(..., help="A motion .npz or .bvh (e.g. a pose estimator's output)."),
     out: Path = typer.Option(..., "-o", "--out", help="Output motion .npz (20 fps)."),
-    strength: float = typer.Option(0.3, help="Share of the diffusion steps to invert, in (0, 1]."),
+    strength: float = typer.Option(0.3, help="Share of the diffusion steps to invert, in [0, 1] (0 returns "
+                                   "the input on the dataset's skeleton)."),
     text: str = typer.Option("", help="Caption to condition on (default: none)."),
     model_dir: Path | None = typer.Option(None, "--model", help="Model folder (default: the shipped model)."),
     steps: int = typer.Option(50, help="DDIM steps of the full schedule."),
     phys_scale: float | None = typer.Option(None, help="BioMoDiffuse models only: physics guidance weight "
                                             "(default: 1)."),
+    anchor_hz: float = typer.Option(1.0, help="Heading and root path slower than this (Hz) follow the input; "
+                                    "0: one yaw + shift for the whole clip."),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
     """Refine a motion by DDIM inversion and denoising (BioMoDiffuse Sec. 3.5; physics guidance with a
@@ -293,7 +296,8 @@ def refine_cmd(
     from physmotion.diffusion.refine import RefineConfig, check_motion, refine
     from physmotion.motion import Motion
 
-    config = RefineConfig(strength=strength, steps=steps, text=text, phys_scale=phys_scale)
+    config = RefineConfig(strength=strength, steps=steps, text=text, phys_scale=phys_scale,
+                          anchor_hz=anchor_hz or None)
     config.check()
     if not path.is_file():
         raise PhysmotionError(f"{path}: no such file")

@@ -13,7 +13,11 @@ with the same settings, so both directions visit the same timesteps (19, 39, ...
 Conventions: the model works on 20 fps features; input at another rate is resampled by linear
 interpolation of the joints in time. The features re-target the motion onto the dataset's uniform
 skeleton and canonicalise it (floor, origin, facing +Z); the refined joints are put back into the
-input's frame by the yaw + translation that best maps the canonical input onto the input.
+input's frame by the yaw + translation that best maps the canonical input onto the input. HumanML3D's
+root is integrated from per-frame velocities, so small errors in them drift the refined path away from
+the input's (tens of centimetres over a clip); the slow part of the heading and of the ground-plane root
+path is therefore taken from the input (``anchor_hz``, a complementary filter: the model refines the fast
+part, where jitter lives, and the input keeps the slow part, where it has none).
 Motions longer than the model's ``max_frames`` (196 frames, 9.8 s at 20 fps) are refused.
 """
 
@@ -24,6 +28,7 @@ from itertools import pairwise
 
 import numpy as np
 import torch
+from scipy.signal import butter, filtfilt
 
 from physmotion.conventions import FPS, MIN_FRAMES
 from physmotion.diffusion.model import MotionDiffusion
@@ -31,34 +36,41 @@ from physmotion.diffusion.physdiff import joints_to_features
 from physmotion.diffusion.samplers import SamplerConfig, default_sampler, guided_x0
 from physmotion.diffusion.schedule import DiffusionConfig, sampling_scheduler
 from physmotion.errors import PhysmotionError, ShapeError
-from physmotion.features.humanml3d import extract_features, recover_from_ric
+from physmotion.features.humanml3d import recover_from_ric
+from physmotion.skeleton import facing_direction
 from physmotion.text.encoder import load_text_encoder
 
 
 @dataclass
 class RefineConfig:
-    """strength: share of the DDIM steps inverted, in (0, 1]; steps: DDIM steps of the full schedule;
-    cfg_scale: guidance of the denoising half; text: caption to condition on ("" = unconditional);
-    phys_scale: physics guidance of a BioMoDiffuse model (None: the model's sampling default, Eq. 11's
-    "forward diffusion with our physics guidance"; other models have none)."""
+    """strength: share of the DDIM steps inverted, in [0, 1] (0 returns the input, re-targeted onto the
+    dataset's skeleton); steps: DDIM steps of the full schedule; cfg_scale: guidance of the denoising
+    half; text: caption to condition on ("" = unconditional); phys_scale: physics guidance of a
+    BioMoDiffuse model (None: the model's sampling default, Eq. 11's "forward diffusion with our physics
+    guidance"; other models have none); anchor_hz: the cut-off below which heading and root path follow
+    the input (None: only one yaw + translation for the whole clip; docs/decisions.md "refine keeps the
+    input's path")."""
 
     strength: float = 0.3
     steps: int = 50
     cfg_scale: float = 2.5
     text: str = ""
     phys_scale: float | None = None
+    anchor_hz: float | None = 1.0
 
     def check(self) -> None:
-        if not (np.isfinite(self.strength) and 0.0 < self.strength <= 1.0):
-            raise PhysmotionError(f"strength must be in (0, 1], got {self.strength:g}")
+        if not (np.isfinite(self.strength) and 0.0 <= self.strength <= 1.0):
+            raise PhysmotionError(f"strength must be in [0, 1], got {self.strength:g}")
+        if self.anchor_hz is not None and not (np.isfinite(self.anchor_hz) and 0.0 < self.anchor_hz < FPS / 2):
+            raise PhysmotionError(f"anchor_hz must be between 0 and {FPS / 2:g} (Nyquist), got {self.anchor_hz:g}")
         if not 1 <= self.steps <= 1000:
             raise PhysmotionError(f"steps must be between 1 and 1000, got {self.steps}")
         SamplerConfig(cfg_scale=self.cfg_scale, phys_scale=self.phys_scale).check()  # the guidance scales
 
     @property
     def inverted_steps(self) -> int:
-        """Steps inverted and denoised again: round(strength * steps), at least 1."""
-        return max(1, round(self.strength * self.steps))
+        """Steps inverted and denoised again: round(strength * steps), at least 1 unless strength is 0."""
+        return max(1, round(self.strength * self.steps)) if self.strength > 0 else 0
 
 
 def check_motion(joints: np.ndarray, fps: float, model: MotionDiffusion) -> np.ndarray:
@@ -85,25 +97,30 @@ def refine(model: MotionDiffusion, joints: np.ndarray, fps: float, config: Refin
     joints: (T, 22, 3) metres, Y up, at ``fps``. Returns (T', 22, 3) float32 at 20 fps (T' = T for 20 fps
     input), in the input's frame, on the dataset's uniform skeleton. Deterministic.
     Raises PhysmotionError / ShapeError (one line) for NaN, a wrong shape, a length outside
-    MIN_FRAMES..max_frames at 20 fps, or a strength outside (0, 1].
+    MIN_FRAMES..max_frames at 20 fps, or a strength outside [0, 1].
     """
     cfg = config or RefineConfig()
     cfg.check()
     SamplerConfig(phys_scale=cfg.phys_scale).check_model(model)
     pos = check_motion(joints, fps, model)
     dim = model.denoiser.feature_dim
-    _, canonical = extract_features(pos)
     feats = joints_to_features(pos, dim)  # T rows: the last one extrapolated (physdiff's convention)
+    # the input as the features hold it (canonical frame; the extrapolated frame can move the floor)
+    canonical = recover_from_ric(feats.astype(np.float64))
     device = next(model.net.parameters()).device
     x = torch.from_numpy(model.normalizer.normalize(feats)).float()[None].to(device)
     phys = cfg.phys_scale if cfg.phys_scale is not None else default_sampler(model).phys_scale
     guide = _Guide(model, cfg.text, device, len(pos), phys)
     k = cfg.inverted_steps
-    x = _invert(x, guide, k, cfg.steps, model.diffusion)
-    x = _denoise(x, guide, k, cfg.steps, cfg.cfg_scale, model.diffusion)
+    if k:
+        x = _invert(x, guide, k, cfg.steps, model.diffusion)
+        x = _denoise(x, guide, k, cfg.steps, cfg.cfg_scale, model.diffusion)
     out = recover_from_ric(model.normalizer.denormalize(x[0].float().cpu().numpy()).astype(np.float64))
-    rot, shift = _yaw_fit(canonical.astype(np.float64), pos)
-    return (out @ rot.T + shift).astype(np.float32)
+    rot, shift = _yaw_fit(canonical, pos)
+    out = out @ rot.T + shift
+    if cfg.anchor_hz is not None and k:
+        out = _anchor_path(out, pos, cfg.anchor_hz)
+    return out.astype(np.float32)
 
 
 class _Guide:
@@ -160,6 +177,26 @@ def _denoise(x: torch.Tensor, guide: _Guide, k: int, steps: int, scale: float, d
         x0 = guide(x, int(t), scale)
         x = sched.step(x0, t, x, eta=0.0).prev_sample
     return x
+
+
+def _anchor_path(out: np.ndarray, ref: np.ndarray, hz: float) -> np.ndarray:
+    """``out`` (T, 22, 3) with the slow part of ``ref``'s (T, 22, 3) heading and ground-plane root path.
+
+    The per-frame heading difference (HumanML3D's facing direction) and root offset in x, z are low-passed
+    below ``hz`` (zero-phase Butterworth, order 2) and applied: each frame turned about its root, then
+    shifted. Root height and the pose about the root stay the model's.
+    """
+    b, a = butter(2, hz / (FPS / 2))
+    f_ref, f_out = facing_direction(ref), facing_direction(out)
+    turn = np.unwrap(np.arctan2(f_ref[:, 0], f_ref[:, 2])) - np.unwrap(np.arctan2(f_out[:, 0], f_out[:, 2]))
+    turn = filtfilt(b, a, turn)
+    c, s = np.cos(turn)[:, None], np.sin(turn)[:, None]
+    rel = out - out[:, :1]
+    x, z = c * rel[..., 0] + s * rel[..., 2], -s * rel[..., 0] + c * rel[..., 2]
+    turned = out[:, :1] + np.stack([x, rel[..., 1], z], axis=-1)
+    shift = filtfilt(b, a, ref[:, 0] - turned[:, 0], axis=0)
+    shift[:, 1] = 0.0
+    return turned + shift[:, None]
 
 
 def _resample(joints: np.ndarray, fps: float, target: float) -> np.ndarray:
