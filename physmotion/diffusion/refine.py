@@ -61,8 +61,9 @@ class RefineConfig:
     def check(self) -> None:
         if not (np.isfinite(self.strength) and 0.0 <= self.strength <= 1.0):
             raise PhysmotionError(f"strength must be in [0, 1], got {self.strength:g}")
-        if self.anchor_hz is not None and not (np.isfinite(self.anchor_hz) and 0.0 < self.anchor_hz < FPS / 2):
-            raise PhysmotionError(f"anchor_hz must be between 0 and {FPS / 2:g} (Nyquist), got {self.anchor_hz:g}")
+        hz = self.anchor_hz
+        if hz is not None and not (np.isfinite(hz) and 0.0 < hz < FPS / 2):
+            raise PhysmotionError(f"anchor_hz must be between 0 and {FPS / 2:g} (Nyquist), got {hz:g}")
         if not 1 <= self.steps <= 1000:
             raise PhysmotionError(f"steps must be between 1 and 1000, got {self.steps}")
         SamplerConfig(cfg_scale=self.cfg_scale, phys_scale=self.phys_scale).check()  # the guidance scales
