@@ -50,12 +50,15 @@ TARGETS = {  # the issue's acceptance, per row of the default on runs and jumps
 
 def _category_table(rows: dict[str, dict[str, float]]) -> list[str]:
     lines = ["| category | clips | success | MPJPE mm | Penetrate in→out | Float in→out | Skate in→out | "
-             "Phys-Err in→out | airborne in→out | residual F mean / p95 (W) | residual τ mean / p95 (W m) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "Phys-Err in→out | airborne in→out | feet touching in→out | slide per touch in→out | "
+             "residual F mean / p95 (W) | residual τ mean / p95 (W m) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, r in rows.items():
         cells = [name, str(r["clips"]), f"{100 * r['success']:.1f} %", f"{r['mpjpe_mm']:.1f}"]
         cells += [f"{r[k + '_in']:.2f} → {r[k + '_out']:.2f}" for k in ("penetrate", "float", "skate", "phys_err")]
         cells += [f"{100 * r['airborne_in']:.1f} → {100 * r['airborne_out']:.1f} %",
+                  f"{100 * r['contact_in']:.1f} → {100 * r['contact_out']:.1f} %",
+                  f"{r['slide_in']:.1f} → {r['slide_out']:.1f}",
                   f"{r['residual_force_mean']:.3f} / {r['residual_force_p95']:.3f}",
                   f"{r['residual_torque_mean']:.3f} / {r['residual_torque_p95']:.3f}"]
         lines.append("| " + " | ".join(cells) + " |")
@@ -69,6 +72,8 @@ def _markdown(results: dict[str, dict[str, dict[str, float]]], seconds: dict[str
            "once per configuration (`ProjectionConfig`, P's plain Morph-selection mode, tau 0.5 m). Input "
            "metrics on the input grounded on the humanoid's surface, output metrics on the simulation, both on "
            "the clip's own humanoid; airborne: share of frames with no foot patch within 2 cm of the floor; "
+           "feet touching: share of frame pairs with a foot joint in contact (5 mm) in both, slide per touch: "
+           "Skate over those pairs (mm per 20 fps frame), so Skate = touching x slide; "
            "residual: root residual force (body weights) and torque (body weight x 1 m), mean and 95th "
            "percentile over all frames.",
            ""]

@@ -11,6 +11,7 @@ from physmotion.eval.projection_quality import (
     airborne_share,
     by_category,
     category,
+    contact_and_slide,
     measure_clips,
 )
 from physmotion.io.importer import load_manifest
@@ -49,6 +50,23 @@ def test_airborne_share_counts_frames_with_both_feet_up(mocap_dir) -> None:
     assert airborne_share(lifted, surface) == pytest.approx(airborne_share(walk, surface) + 20 / 60, abs=0.02)
 
 
+def test_contact_share_times_slide_is_skate(mocap_dir) -> None:
+    from physmotion.io.importer import import_clip
+    from physmotion.metrics import physical_metrics
+    from physmotion.physics.surface import HumanoidSurface, ground_on_surface
+
+    info = {c.clip: c for c in load_manifest(mocap_dir)}["bandai2_dataset-2_run_feminine_001"]
+    motion = import_clip(info)
+    run, body = ground_on_surface(motion.joints.astype(np.float64))
+    surface = HumanoidSurface(body)
+    share, slide = contact_and_slide(run, motion.fps, surface)
+    assert 0.0 < share < 1.0 and slide > 0.0
+    skate = physical_metrics(run, fps=motion.fps, body=surface)["skate"]
+    assert share * slide == pytest.approx(skate, rel=1e-9)
+    # feet lifted over the tolerance: no contact, no Skate, however they move
+    assert contact_and_slide(run + [0.0, 0.05, 0.0], motion.fps, surface) == (0.0, 0.0)
+
+
 def test_by_category_summarises_measured_clips(mocap_dir) -> None:
     clips = {c.clip: c for c in load_manifest(mocap_dir)}
     chosen = [clips[n] for n in ("bandai2_dataset-2_walk_normal_001", "bandai2_dataset-2_run_feminine_001",
@@ -60,3 +78,4 @@ def test_by_category_summarises_measured_clips(mocap_dir) -> None:
         assert 0.0 <= row["success"] <= 1.0 and row["mpjpe_mm"] > 0
         assert row["residual_force_p95"] >= row["residual_force_mean"] >= 0.0
         assert 0.0 <= row["airborne_out"] <= 1.0
+        assert 0.0 <= row["contact_out"] <= 1.0 and row["slide_out"] >= 0.0
