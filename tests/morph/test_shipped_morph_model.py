@@ -14,7 +14,7 @@ MORPH_DIR = Path(DEFAULT_MODEL_DIR).parent / "morph"
 def test_morph_model_card_facts_and_generation() -> None:
     model = MotionDiffusion.load(MORPH_DIR)
     info = model.info["morph"]
-    assert info["rounds"] == 2 and info["selected"] == {"refined": 275, "input": 142}
+    assert info["rounds"] == 1 and info["selected"] == {"refined": 364, "input": 53}  # round 1 ships
     assert model.licence_tag == "NC" and "NC" in model.info["licence_tags"]  # the base's NC data carries through
     vocabulary = load_vocabulary(MORPH_DIR)
     assert vocabulary is not None and load_vocabulary(DEFAULT_MODEL_DIR) <= vocabulary
