@@ -536,10 +536,10 @@ def evaluate_cmd(
     from physmotion.diffusion.model import MotionDiffusion
     from physmotion.diffusion.samplers import default_sampler
     from physmotion.eval.evaluator import Evaluator
-    from physmotion.eval.table import EvaluateConfig, evaluate
+    from physmotion.eval.table import EvaluateConfig, evaluate, table_paths
     from physmotion.physics_mode import parse_modes
 
-    for written in (out.with_suffix(".md"), out.with_suffix(".json")):  # EvalTable.write's names
+    for written in table_paths(out):  # EvalTable.write's names
         _check_out(written, overwrite)
     modes = tuple(str(m) for m in parse_modes(physics)) if physics is not None else None
     cfg = _with(EvaluateConfig.quick() if quick else EvaluateConfig(), modes=modes, split=split, seed=seed,

@@ -125,13 +125,21 @@ class EvalTable:
         return "\n".join(lines) + "\n"
 
     def write(self, stem: str | Path) -> list[Path]:
-        """Write ``<stem>.md`` and ``<stem>.json`` atomically."""
-        stem = Path(stem)
-        stem.parent.mkdir(parents=True, exist_ok=True)
-        md, js = stem.with_suffix(".md"), stem.with_suffix(".json")
+        """Write ``<stem>.md`` and ``<stem>.json`` atomically (:func:`table_paths`)."""
+        md, js = table_paths(stem)
+        md.parent.mkdir(parents=True, exist_ok=True)
         write_atomic(md, lambda f: f.write(_markdown_header(self.meta) + self.to_markdown()), "w")
         write_atomic(js, lambda f: f.write(self.to_json()), "w")
         return [md, js]
+
+
+def table_paths(stem: str | Path) -> tuple[Path, Path]:
+    """``(<stem>.md, <stem>.json)``. The suffixes are appended, so a stem with a dot ("eval_0.5") keeps
+    it; a stem given as ``x.md`` or ``x.json`` stands for ``x``."""
+    stem = Path(stem)
+    if stem.suffix in (".md", ".json"):
+        stem = stem.with_suffix("")
+    return stem.with_name(stem.name + ".md"), stem.with_name(stem.name + ".json")
 
 
 def evaluate(

@@ -1,13 +1,14 @@
 """The evaluation table: mode parsing, the real-data row, and a quick run with real (tiny) models."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from physmotion.diffusion.samplers import SamplerConfig
 from physmotion.errors import PhysmotionError
-from physmotion.eval.table import REAL, EvaluateConfig, evaluate
+from physmotion.eval.table import REAL, EvaluateConfig, evaluate, table_paths
 from physmotion.generate import GenerateConfig
 from physmotion.physics_mode import PhysicsMode, parse_modes
 
@@ -67,6 +68,13 @@ def test_table_writes_markdown_and_json(quick_table, tmp_path):
     data = json.loads(js.read_text())
     assert data["rows"]["none"]["FID"]["mean"] == pytest.approx(quick_table.rows["none"]["FID"][0])
     assert not list(tmp_path.rglob("*.tmp"))
+
+
+def test_table_paths_keep_a_dotted_stem(tmp_path):
+    # "-o runs/eval_0.5" once wrote runs/eval_0.md, where "-o runs/eval_0.25" wrote too
+    assert table_paths(tmp_path / "eval_0.5") == (tmp_path / "eval_0.5.md", tmp_path / "eval_0.5.json")
+    assert table_paths(tmp_path / "eval.md") == (tmp_path / "eval.md", tmp_path / "eval.json")
+    assert table_paths("results/evaluate") == (Path("results/evaluate.md"), Path("results/evaluate.json"))
 
 
 def test_bad_modes_fail_before_any_work(tiny_model, tiny_evaluator, built_dir):
