@@ -1,7 +1,8 @@
 """Generation wall time by physics mode, one table from one run (compare the ratios).
 
 Usage: python bench/generate.py [--model DIR] [--biomo DIR] [--seconds 6] [--repeats 2]
-Modes: none, post:4 (as many projections as PhysDiff's default) and physdiff:end:4,space:1; batches of 1
+Modes: none, morph (Morph's inference: pre-processing, one P, imitation selection), post:4 (as many
+projections as PhysDiff's default) and physdiff:end:4,space:1; batches of 1
 and 16 motions (one caption each, from the physics prompt set); 50 DDIM steps, CFG 2.5. The model and the
 text encoder are loaded and warmed up once before timing; each time is the best of ``--repeats`` rounds.
 PhysDiff reports 2.5x none at batch 1.
@@ -35,7 +36,7 @@ from physmotion.diffusion.samplers import default_sampler
 from physmotion.eval.prompts import PHYSICS_PROMPTS
 from physmotion.generate import GenerateConfig, generate
 
-MODES = ("none", "post:4", "physdiff:end:4,space:1")
+MODES = ("none", "morph", "post:4", "physdiff:end:4,space:1")  # morph: Morph's inference, one P
 PHYSDIFF = MODES[-1]
 BIOMO = "BioMoDiffuse none (dpmpp-sde 10 steps)"
 
