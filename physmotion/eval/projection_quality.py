@@ -14,11 +14,10 @@ import numpy as np
 
 from physmotion.io.importer import ClipInfo, import_clip, load_manifest
 from physmotion.metrics import physical_metrics
-from physmotion.metrics.physical import PARAMS, foot_contacts
+from physmotion.metrics.physical import skate_factors
 from physmotion.physics.projection import ProjectedMotion, ProjectionConfig, project
 from physmotion.physics.surface import HumanoidSurface, ground_on_surface
 from physmotion.physics.workers import map_in_workers
-from physmotion.skeleton import FOOT_JOINTS
 
 LOCOMOTION = re.compile(r"\b(walk|walks|walking|run|runs|running|jog|jogs|jogging)\b")
 """A clip whose first caption matches is a walking/running clip."""
@@ -53,27 +52,6 @@ def airborne_share(joints: np.ndarray, surface: HumanoidSurface) -> float:
     return float((feet.min(axis=-1) > AIRBORNE_HEIGHT).mean())
 
 
-def contact_and_slide(joints: np.ndarray, fps: float, surface: HumanoidSurface) -> tuple[float, float]:
-    """Skate split in two factors: (share of adjacent-frame pairs in which some foot joint is in contact in
-    both frames, mean Skate over those pairs in mm per 20 fps frame), so that Skate = share x slide.
-
-    Skate averages over all frame pairs, counting 0 where no foot touches: a motion whose feet hover over
-    the 5 mm tolerance scores little however its feet move, and one that stands on the floor pays for
-    every millimetre. joints: (T, 22, 3) metres, floor at y = 0.
-    """
-    x = np.asarray(joints, dtype=np.float64)
-    contact = foot_contacts(x, body=surface)
-    both = contact[:-1] & contact[1:]  # (T-1, 4)
-    step = np.linalg.norm(np.diff(x[:, list(FOOT_JOINTS)][..., [0, 2]], axis=0), axis=-1)
-    step *= 1000.0 * fps / PARAMS.reference_fps
-    n = both.sum(axis=-1)
-    touching = n > 0
-    if not touching.any():
-        return 0.0, 0.0
-    per_pair = (step * both).sum(axis=-1)[touching] / n[touching]
-    return float(touching.mean()), float(per_pair.mean())
-
-
 def locomotion_clips(mocap_dir: str | Path) -> list[ClipInfo]:
     """The walking and running clips of a mocap directory, in manifest order."""
     return [c for c in load_manifest(mocap_dir) if LOCOMOTION.search(c.captions[0].lower())]
@@ -90,7 +68,7 @@ class ClipProjection:
     after: dict[str, float]
     airborne_before: float = 0.0  # share of frames with both feet off the floor (airborne_share)
     airborne_after: float = 0.0
-    contact_before: tuple[float, float] = (0.0, 0.0)  # contact_and_slide: (share, slide mm)
+    contact_before: tuple[float, float] = (0.0, 0.0)  # skate_factors: (share touching, slide mm)
     contact_after: tuple[float, float] = (0.0, 0.0)
 
 
@@ -103,9 +81,10 @@ def measure_projection(
     surface = HumanoidSurface(body)
     before = physical_metrics(grounded, fps=fps, body=surface)
     after = physical_metrics(result.simulated, fps=fps, body=surface)
-    return ClipProjection(result, before, after, airborne_share(grounded, surface),
-                          airborne_share(result.simulated, surface), contact_and_slide(grounded, fps, surface),
-                          contact_and_slide(result.simulated, fps, surface))  # fmt: skip
+    sim = result.simulated
+    return ClipProjection(result, before, after,
+                          airborne_share(grounded, surface), airborne_share(sim, surface),
+                          skate_factors(grounded, fps, body=surface), skate_factors(sim, fps, body=surface))
 
 
 def measure_clips(
@@ -127,8 +106,9 @@ SUMMARY_METRICS = ("penetrate", "float", "skate", "phys_err")
 def summarize(measured: list[ClipProjection]) -> dict[str, float]:
     """One row over clips: ``clips``, ``success`` (share), ``mpjpe_mm`` (mean over all clips), the metrics of
     input and output (``<metric>_in`` / ``_out``, mm, means over clips), airborne shares of input and
-    output, Skate's two factors (``contact_in/out``, ``slide_in/out``: :func:`contact_and_slide`, means
-    over clips), and the residual force and torque (mean over all frames, p95 over all frames; x W, x W m)."""
+    output, Skate's two factors (``contact_in/out``, ``slide_in/out``: ``metrics.physical.skate_factors``,
+    means over clips), and the residual force and torque (mean over all frames, p95 over all frames;
+    x W, x W m)."""
     if not measured:
         return {"clips": 0}
     force = np.concatenate([m.result.residual_force for m in measured])

@@ -267,14 +267,34 @@ def _float(b: _Batch) -> np.ndarray:
     return b.mean(height, 0)
 
 
-def _skate(b: _Batch) -> np.ndarray:
+def _skate_pairs(b: _Batch) -> tuple[np.ndarray, np.ndarray]:
+    """Per adjacent frame pair (B, T-1): Skate's term (mm, 0 where no foot joint touches in both frames)
+    and whether some foot joint does."""
     contact = _in_contact(b.feet, b.params)  # (B, T, 4)
     both = contact[:, :-1] & contact[:, 1:]
     feet = b.joints[:, :, list(FOOT_JOINTS)][..., _HORIZONTAL]
     disp = np.linalg.norm(np.diff(feet, axis=1), axis=-1) * 1000.0 * b.per_frame_rate()  # (B, T-1, 4)
     n = both.sum(axis=-1)
-    per_pair = np.where(n > 0, (disp * both).sum(axis=-1) / np.maximum(n, 1), 0.0)
-    return b.mean(per_pair, 1)
+    return np.where(n > 0, (disp * both).sum(axis=-1) / np.maximum(n, 1), 0.0), n > 0
+
+
+def _skate(b: _Batch) -> np.ndarray:
+    return b.mean(_skate_pairs(b)[0], 1)
+
+
+def skate_factors(joints: np.ndarray, fps: float = FPS, *, body: BodySurface | None = None,
+                  params: MetricParams = PARAMS) -> tuple[float, float]:  # fmt: skip
+    """Skate of one motion (T, 22, 3) split in two factors: (share of adjacent frame pairs in which some
+    foot joint is in contact in both frames, mean Skate over those pairs in mm per reference frame), so
+    that Skate = share x slide. Skate counts 0 where no foot touches: feet hovering over the tolerance
+    score little however they move, feet standing on the floor pay for every millimetre."""
+    b = _prepare(joints, fps, None, None, body, params)
+    if b.joints.shape[0] != 1:
+        raise ShapeError(f"skate_factors takes one motion (T, 22, 3), got {np.shape(joints)}")
+    per_pair, touching = _skate_pairs(b)
+    if not touching.any():
+        return 0.0, 0.0
+    return float(touching.mean()), float(per_pair[touching].mean())
 
 
 def _pfc(b: _Batch) -> np.ndarray:

@@ -11,7 +11,6 @@ from physmotion.eval.projection_quality import (
     airborne_share,
     by_category,
     category,
-    contact_and_slide,
     measure_clips,
 )
 from physmotion.io.importer import load_manifest
@@ -48,23 +47,6 @@ def test_airborne_share_counts_frames_with_both_feet_up(mocap_dir) -> None:
     lifted = walk.copy()
     lifted[20:40, :, 1] += 2 * AIRBORNE_HEIGHT
     assert airborne_share(lifted, surface) == pytest.approx(airborne_share(walk, surface) + 20 / 60, abs=0.02)
-
-
-def test_contact_share_times_slide_is_skate(mocap_dir) -> None:
-    from physmotion.io.importer import import_clip
-    from physmotion.metrics import physical_metrics
-    from physmotion.physics.surface import HumanoidSurface, ground_on_surface
-
-    info = {c.clip: c for c in load_manifest(mocap_dir)}["bandai2_dataset-2_run_feminine_001"]
-    motion = import_clip(info)
-    run, body = ground_on_surface(motion.joints.astype(np.float64))
-    surface = HumanoidSurface(body)
-    share, slide = contact_and_slide(run, motion.fps, surface)
-    assert 0.0 < share < 1.0 and slide > 0.0
-    skate = physical_metrics(run, fps=motion.fps, body=surface)["skate"]
-    assert share * slide == pytest.approx(skate, rel=1e-9)
-    # feet lifted over the tolerance: no contact, no Skate, however they move
-    assert contact_and_slide(run + [0.0, 0.05, 0.0], motion.fps, surface) == (0.0, 0.0)
 
 
 def test_by_category_summarises_measured_clips(mocap_dir) -> None:

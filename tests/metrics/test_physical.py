@@ -468,3 +468,23 @@ def test_real_walking_is_nearly_physical(mocap_root: Path) -> None:
         # Real capture slides a little (CMU 02_01: 6.7 mm per frame in the data itself).
         assert m["skate"] < 8.0 and m["skate_ratio"] < 0.3, clip
         assert 0.3 < m["speed"] < 3.0, clip
+
+
+def test_skate_factors_multiply_back_to_skate(mocap_dir: Path) -> None:
+    """Skate = share of frame pairs with a foot touching x Skate over those pairs, on a captured run."""
+    from physmotion.io.importer import import_clip, load_manifest
+    from physmotion.metrics.physical import skate_factors
+    from physmotion.physics.surface import HumanoidSurface, ground_on_surface
+
+    info = {c.clip: c for c in load_manifest(mocap_dir)}["bandai2_dataset-2_run_feminine_001"]
+    motion = import_clip(info)
+    run, body = ground_on_surface(motion.joints.astype(np.float64))
+    surface = HumanoidSurface(body)
+    share, slide = skate_factors(run, motion.fps, body=surface)
+    assert 0.0 < share < 1.0 and slide > 0.0
+    skate = physical_metrics(run, fps=motion.fps, body=surface)["skate"]
+    assert share * slide == pytest.approx(skate, rel=1e-9)
+    # feet lifted over the tolerance: no contact, no Skate, however they move
+    assert skate_factors(run + [0.0, 0.05, 0.0], motion.fps, body=surface) == (0.0, 0.0)
+    with pytest.raises(ShapeError):
+        skate_factors(np.stack([run, run]), motion.fps, body=surface)
