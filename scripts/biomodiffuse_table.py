@@ -37,6 +37,7 @@ from physmotion.eval.ablation import (
     wins,
 )
 from physmotion.eval.evaluator import Evaluator
+from physmotion.eval.table import table_paths
 from physmotion.motion import write_atomic
 
 
@@ -146,8 +147,9 @@ def main() -> None:
     }
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    write_atomic(out.with_suffix(".json"), lambda f: f.write(json.dumps(result, indent=2) + "\n"), "w")
-    write_atomic(out.with_suffix(".md"), lambda f: f.write(_markdown(result)), "w")
+    md_path, js_path = table_paths(out)
+    write_atomic(js_path, lambda f: f.write(json.dumps(result, indent=2) + "\n"), "w")
+    write_atomic(md_path, lambda f: f.write(_markdown(result)), "w")
     print(_markdown(result))
 
 

@@ -30,6 +30,7 @@ from physmotion.conventions import FPS
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.refine import RefineConfig, refine
 from physmotion.diffusion.samplers import default_sampler
+from physmotion.eval.table import table_paths
 from physmotion.metrics import physical_metrics
 from physmotion.motion import write_atomic
 from physmotion.physics.surface import HumanoidSurface, ground_on_surface
@@ -136,8 +137,9 @@ def main() -> None:
     meta["seconds"] = round(time.time() - t0, 1)
     md = to_markdown(table, meta)
     js = json.dumps({"meta": meta, "rows": table}, indent=2) + "\n"
-    write_atomic(args.out.with_suffix(".md"), lambda f: f.write(md.encode()))
-    write_atomic(args.out.with_suffix(".json"), lambda f: f.write(js.encode()))
+    md_path, js_path = table_paths(args.out)
+    write_atomic(md_path, lambda f: f.write(md.encode()))
+    write_atomic(js_path, lambda f: f.write(js.encode()))
     print(md)
 
 

@@ -108,18 +108,19 @@ def refine(model: MotionDiffusion, joints: np.ndarray, fps: float, config: Refin
     feats = joints_to_features(pos, dim)  # T rows: the last one extrapolated (physdiff's convention)
     # the input as the features hold it (canonical frame; the extrapolated frame can move the floor)
     canonical = recover_from_ric(feats.astype(np.float64))
+    rot, shift = _yaw_fit(canonical, pos)
+    k = cfg.inverted_steps
+    if not k:  # strength 0: nothing to refine, the input as the features hold it, back in its frame
+        return (canonical @ rot.T + shift).astype(np.float32)
     device = next(model.net.parameters()).device
     x = torch.from_numpy(model.normalizer.normalize(feats)).float()[None].to(device)
     phys = cfg.phys_scale if cfg.phys_scale is not None else default_sampler(model).phys_scale
     guide = _Guide(model, cfg.text, device, len(pos), phys)
-    k = cfg.inverted_steps
-    if k:
-        x = _invert(x, guide, k, cfg.steps, model.diffusion)
-        x = _denoise(x, guide, k, cfg.steps, cfg.cfg_scale, model.diffusion)
+    x = _invert(x, guide, k, cfg.steps, model.diffusion)
+    x = _denoise(x, guide, k, cfg.steps, cfg.cfg_scale, model.diffusion)
     out = recover_from_ric(model.normalizer.denormalize(x[0].float().cpu().numpy()).astype(np.float64))
-    rot, shift = _yaw_fit(canonical, pos)
     out = out @ rot.T + shift
-    if cfg.anchor_hz is not None and k:
+    if cfg.anchor_hz is not None:
         out = _anchor_path(out, pos, cfg.anchor_hz)
     return out.astype(np.float32)
 
