@@ -12,7 +12,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from physmotion.conventions import FPS, MAX_FRAMES, MAX_TEXT_TOKENS, MIN_FRAMES
+from physmotion.conventions import FLOOR_JOINTS, FLOOR_SURFACE, FPS, MAX_FRAMES, MAX_TEXT_TOKENS, MIN_FRAMES
 from physmotion.errors import PhysmotionError, PhysmotionWarning
 from physmotion.io.rigs import RIGS  # the --rig help lists the tables
 
@@ -600,6 +600,12 @@ morph_app = typer.Typer(help="Morph: synthetic motions refined by physics, selec
 app.add_typer(morph_app, name="morph")
 
 
+# FinetuneConfig.floor's default (a test checks they agree); named here so that --help needs no torch.
+FLOOR_HELP = (f"Floor of the training motions and so of the model's samples: '{FLOOR_SURFACE}' (the humanoid's soles "
+              f"on the floor, as P simulated them) or '{FLOOR_JOINTS}' (HumanML3D's lowest joint on y = 0) "
+              f"(default: {FLOOR_SURFACE}).")
+
+
 @morph_app.command("synth")
 def morph_synth_cmd(
     data: Path = typer.Option(..., help="HumanML3D-layout folder whose train captions are generated."),
@@ -649,6 +655,7 @@ def morph_finetune_cmd(
     batch_size: int | None = typer.Option(None, help="Batch size (default: the model's training run's)."),
     tau: float | None = typer.Option(None, help="Imitation selection threshold, metres (default: 0.5)."),
     seed: int | None = typer.Option(None, help="Seed of data order and noise (default: 0)."),
+    floor: str | None = typer.Option(None, help=FLOOR_HELP),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in --out where it stopped."),
 ) -> None:
     """Morph's Stage 2: fine-tune a model on its physics-refined synthetic motions mixed with real ones."""
@@ -657,7 +664,7 @@ def morph_finetune_cmd(
 
     check_output(out, "folder", overwrite=resume, hint="pass --resume to continue its run, or choose another -o")
     cfg = _with(FinetuneConfig(model=str(model), synth=str(synth), data=str(data), out=str(out)), mix=mix, lr=lr,
-                steps=steps, batch_size=batch_size, tau=tau, seed=seed)  # fmt: skip
+                steps=steps, batch_size=batch_size, tau=tau, seed=seed, floor=floor)  # fmt: skip
     result = finetune(cfg, resume=resume, progress=sys.stderr.isatty())
     c, last = result.selection.counts, result.train.losses[-1][1] if result.train.losses else float("nan")
     console.print(f"fine-tuned to step {result.train.step} on {result.synthetic_items} synthetic ({c['refined']} "
@@ -677,6 +684,7 @@ def morph_run_cmd(
     mix: float | None = typer.Option(None, help="Share of synthetic motions in each batch (default: 0.5)."),
     lr: float | None = typer.Option(None, help="Fine-tuning learning rate (default: 1e-05)."),
     seed: int | None = typer.Option(None, help="Random seed of synthesis and fine-tuning (default: 0)."),
+    floor: str | None = typer.Option(None, help=FLOOR_HELP),
 ) -> None:
     """Morph's multi-round loop: per round, synthesise and refine, select, fine-tune from the last round."""
     from physmotion.morph.finetune import FinetuneConfig
@@ -687,7 +695,8 @@ def morph_run_cmd(
     check_output(out, "folder", overwrite=True)
     check_run_dir(out, model)
     synth_cfg = _with(SynthConfig(), per_caption=per_caption, seed=seed)
-    ft_cfg = _with(FinetuneConfig(model="", synth="", data=str(data), out=""), steps=steps, mix=mix, lr=lr, seed=seed)
+    ft_cfg = _with(FinetuneConfig(model="", synth="", data=str(data), out=""), steps=steps, mix=mix, lr=lr, seed=seed,
+                   floor=floor)  # fmt: skip
     rows = run_rounds(model, data, out, rounds, synth_cfg, ft_cfg, progress=sys.stderr.isatty())
     last = rows[-1]
     console.print(f"{len(rows)} round(s) done; last: IFR {last.ifr:.3f}, loss {last.final_loss:.4f}, model in "

@@ -15,3 +15,21 @@ MIN_FRAMES: int = 40
 MAX_TEXT_TOKENS: int = 32
 """Tokens of a caption the text encoder reads (special tokens included); the rest is cut off. Our
 captions are short; HumanML3D's are under 30 words."""
+
+FLOOR_JOINTS: str = "joints"
+"""Floor convention of HumanML3D's features: each clip's lowest *joint* on y = 0 (``process_file``). It
+leaves the humanoid's soles about 2.5 cm under the floor (docs/decisions.md: "floor convention")."""
+
+FLOOR_SURFACE: str = "surface"
+"""Floor convention of physical motion: the humanoid's soles on y = 0, as P's simulated motions stand.
+A model fine-tuned on motions in it (Morph, ``FinetuneConfig.floor``) samples in it; the model's
+``info["floor"]`` says which of the two it learned (absent: FLOOR_JOINTS)."""
+
+FLOORS: tuple[str, ...] = (FLOOR_JOINTS, FLOOR_SURFACE)
+
+
+def check_floor(floor: str) -> str:
+    """``floor`` if it names a floor convention, else ValueError (a programming error, not a user's)."""
+    if floor not in FLOORS:
+        raise ValueError(f"floor convention must be one of {FLOORS}, got {floor!r}")
+    return floor

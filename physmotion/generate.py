@@ -133,7 +133,7 @@ def generate(
         residuals = list(projector.last_residuals)
     if mode.kind == POST:
         for k in range(mode.projections):
-            joints = projector.project_joints([on_data_floor(j) if k else j for j in joints])
+            joints = projector.project_joints([on_data_floor(j) for j in joints] if k else projector.data_floor(joints))
             bodies, resets = list(projector.last_bodies), projector.last_resets
             residuals = list(projector.last_residuals)
             if on_step:

@@ -13,8 +13,10 @@ from pathlib import Path
 import torch
 
 from physmotion.checkpoint import load_folder, save_folder
+from physmotion.conventions import FLOOR_JOINTS, FLOORS
 from physmotion.diffusion.denoiser import DenoiserConfig, build_denoiser
 from physmotion.diffusion.schedule import DiffusionConfig
+from physmotion.errors import PhysmotionError
 from physmotion.features.normalize import Normalizer
 
 DEFAULT_MODEL_DIR = Path(__file__).resolve().parent.parent / "models" / "default"
@@ -36,6 +38,12 @@ class MotionDiffusion:
         """"NC" when any training clip was non-commercial, else "open"."""
         return "NC" if "NC" in self.info.get("licence_tags", []) else "open"
 
+    @property
+    def floor(self) -> str:
+        """The floor convention its samples stand in (:data:`~physmotion.conventions.FLOORS`): HumanML3D's
+        lowest joint on y = 0, unless the model was fine-tuned on motions with the soles on the floor."""
+        return self.info.get("floor", FLOOR_JOINTS)
+
     def save(self, folder: str | Path) -> None:
         """Write weights and config atomically into ``folder``."""
         config = {"denoiser": self.denoiser.to_dict(), "diffusion": self.diffusion.to_dict(),
@@ -47,6 +55,10 @@ class MotionDiffusion:
         """Load a model folder (default: the shipped model). Raises PhysmotionError if it is missing or broken."""
         folder = Path(folder) if folder is not None else DEFAULT_MODEL_DIR
         net, normalizer, config = load_folder(folder, _build, device)
+        floor = config.get("info", {}).get("floor", FLOOR_JOINTS)
+        if floor not in FLOORS:
+            raise PhysmotionError(f"{folder}: unknown floor convention {floor!r} in config.json (expected one of "
+                                  f"{', '.join(FLOORS)})")  # fmt: skip
         return cls(net=net, denoiser=DenoiserConfig(**config["denoiser"]),
                    diffusion=DiffusionConfig(**config["diffusion"]), normalizer=normalizer,
                    text_encoder=config.get("text_encoder", "minilm"), info=config.get("info", {}))  # fmt: skip

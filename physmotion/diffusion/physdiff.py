@@ -2,8 +2,9 @@
 
 At the scheduled steps the denoised motion x~ is replaced by P(x~) before the DDIM update, where P is
 :func:`physmotion.physics.projection.project`. In feature space this means: de-normalise, recover joints
-(``recover_from_ric``), simulate, re-extract HumanML3D features from the simulated joints (which also puts
-the floor back under the lowest foot joint, the dataset's convention) and normalise again.
+(``recover_from_ric``), simulate, re-extract HumanML3D features from the simulated joints in the model's
+floor convention (the dataset's puts the floor back under the lowest joint; a model fine-tuned on
+physical motion keeps the simulated soles on the floor) and normalise again.
 
 Schedules name the projection steps by t, the number of sampling steps still to come (t = 0 is the last
 step), as PhysDiff's Sec. 4.4 does:
@@ -20,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from physmotion.conventions import FPS
+from physmotion.conventions import FLOOR_JOINTS, FLOOR_SURFACE, FPS, check_floor
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.errors import PhysmotionError
 from physmotion.features.biomech import FEATURE_DIM_BIOMECH, extract_features_329
@@ -81,8 +82,14 @@ class FeatureProjector:
         self.last_resets: list[int] = []  # ... and how often each was reset
         self.last_residuals: list[np.ndarray] = []  # ... and the root residual (T, 2) it used
 
+    def data_floor(self, joints: list[np.ndarray]) -> list[np.ndarray]:
+        """Joints recovered from the model's samples, put in the data convention P takes: a FLOOR_SURFACE
+        model's motions go onto their lowest joint (P raises the soles back onto the floor itself)."""
+        return [on_data_floor(j) for j in joints] if self.model.floor == FLOOR_SURFACE else list(joints)
+
     def project_joints(self, joints: list[np.ndarray]) -> list[np.ndarray]:
-        """Project a list of joint arrays (T_i, 22, 3); motions of equal length go through in one batch."""
+        """Project a list of joint arrays (T_i, 22, 3) in the data convention; motions of equal length go
+        through in one batch."""
         out: list[np.ndarray] = [np.empty(0)] * len(joints)
         bodies: list[np.ndarray] = [np.empty(0)] * len(joints)
         resets = [0] * len(joints)
@@ -109,11 +116,11 @@ class FeatureProjector:
         norm = self.model.normalizer
         feats = norm.denormalize(x0.detach().float().cpu().numpy())
         joints = [recover_from_ric(feats[i, :n].astype(np.float64)) for i, n in enumerate(lengths)]
-        projected = self.project_joints(joints)
+        projected = self.project_joints(self.data_floor(joints))
         out = x0.detach().clone()
         dim = x0.shape[-1]  # 263, or BioMoDiffuse's 329: the features are re-extracted in the model's own
         for i, (n, j) in enumerate(zip(lengths, projected)):
-            out[i, :n] = torch.from_numpy(norm.normalize(joints_to_features(j, dim))).to(out)
+            out[i, :n] = torch.from_numpy(norm.normalize(joints_to_features(j, dim, self.model.floor))).to(out)
         return out
 
 
@@ -123,15 +130,18 @@ def on_data_floor(joints: np.ndarray) -> np.ndarray:
     return joints - np.array([0.0, joints[..., 1].min(), 0.0])
 
 
-def joints_to_features(joints: np.ndarray, dim: int = FEATURE_DIM) -> np.ndarray:
+def joints_to_features(joints: np.ndarray, dim: int = FEATURE_DIM, floor: str = FLOOR_JOINTS) -> np.ndarray:
     """HumanML3D features with one row per frame: (T, 22, 3) -> (T, dim), dim 263 or 329 (BioMoDiffuse).
 
     HumanML3D's features of T frames describe T-1 transitions; a last frame extrapolated at constant
     velocity keeps the length, so a projected x0 replaces the denoised one frame for frame.
+    floor: FLOOR_JOINTS re-floors the motion on its lowest joint (the dataset's convention); FLOOR_SURFACE
+    keeps its heights (a simulated motion's soles on the floor: the convention of a model fine-tuned so).
     """
     ext = np.concatenate([joints, 2 * joints[-1:] - joints[-2:-1]], axis=0)
+    on_joints = check_floor(floor) == FLOOR_JOINTS
     if dim == FEATURE_DIM_BIOMECH:
-        return extract_features_329(ext)[0]
+        return extract_features_329(ext, floor=on_joints)[0]
     if dim != FEATURE_DIM:
         raise PhysmotionError(f"features must be {FEATURE_DIM}- or {FEATURE_DIM_BIOMECH}-dimensional, got {dim}")
-    return extract_features(ext)[0]
+    return extract_features(ext, floor=on_joints)[0]

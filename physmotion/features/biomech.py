@@ -34,18 +34,18 @@ SLICES_BIOMECH: dict[str, slice] = {**SLICES, "joint_acc": slice(FEATURE_DIM, FE
 
 
 def extract_features_329(
-    joints: np.ndarray, *, uniform: bool = True, feet_thre: float = 0.002
+    joints: np.ndarray, *, uniform: bool = True, feet_thre: float = 0.002, floor: bool = True
 ) -> tuple[np.ndarray, np.ndarray]:
     """The 329-d features of a motion.
 
-    joints: (T, 22, 3) metres, Y up, T >= 3 (an acceleration needs three frames). uniform, feet_thre: as
-    in :func:`~physmotion.features.humanml3d.extract_features`.
+    joints: (T, 22, 3) metres, Y up, T >= 3 (an acceleration needs three frames). uniform, feet_thre,
+    floor: as in :func:`~physmotion.features.humanml3d.extract_features`.
     Returns (features (T-1, 329) float32, canonical_joints (T, 22, 3) float32); ``features[:, :263]``
     equals ``extract_features(joints)[0]``. Raises ShapeError for bad input or fewer than 3 frames.
     """
     if isinstance(joints, np.ndarray) and joints.ndim == 3 and joints.shape[0] < 3:
         raise ShapeError(f"joints need at least 3 frames for accelerations, got {joints.shape[0]}")
-    out = _extract(joints, uniform=uniform, feet_thre=feet_thre)
+    out = _extract(joints, uniform=uniform, feet_thre=feet_thre, floor=floor)
     acc = joint_accelerations(out.canonical, out.half_yaw)
     features = np.concatenate([out.features, acc.reshape(len(acc), -1)], axis=-1)
     return features.astype(np.float32), out.canonical.astype(np.float32)

@@ -113,6 +113,9 @@ _PARENT = np.array([max(p, 0) for p in PARENTS])
 
 _MIN_NORM = 1e-12
 
+# The dims that hold absolute heights: root y and the y of each ric joint (joints 1..21).
+_HEIGHT_DIMS = [SLICES["root_y"].start] + list(range(SLICES["ric"].start + 1, SLICES["ric"].stop, 3))
+
 
 class _Extracted(NamedTuple):
     """Everything computed by :func:`_extract`, float64 (used by :mod:`physmotion.features.biomech`)."""
@@ -127,7 +130,7 @@ class _Extracted(NamedTuple):
 
 
 def extract_features(
-    joints: np.ndarray, *, uniform: bool = True, feet_thre: float = 0.002
+    joints: np.ndarray, *, uniform: bool = True, feet_thre: float = 0.002, floor: bool = True
 ) -> tuple[np.ndarray, np.ndarray]:
     """HumanML3D features of a motion (its ``process_file``).
 
@@ -138,21 +141,39 @@ def extract_features(
         lengths in frame 0 as HumanML3D does.
     feet_thre: a foot joint is in contact at t when its squared displacement t -> t+1 is below this
         (m^2 per frame; HumanML3D uses 0.002 at 20 fps, i.e. under ~4.5 cm per frame).
+    floor: put the clip's lowest joint on y = 0 (HumanML3D's convention, :data:`~physmotion.conventions.
+        FLOOR_JOINTS`). False keeps the heights as given (scaled with the uniform skeleton), e.g. a
+        simulated motion whose soles stand on the floor (:data:`~physmotion.conventions.FLOOR_SURFACE`):
+        the features store absolute heights (root y and the ric block's y), so they can hold either.
 
     Returns (features (T-1, 263) float32, canonical_joints (T, 22, 3) float32): the canonical joints are the
-    positions the features encode (uniform skeleton if asked, lowest joint of the clip on y = 0, root XZ of
-    frame 0 at the origin, facing +Z at frame 0); ``recover_from_ric(features) ~ canonical_joints[:-1]``.
+    positions the features encode (uniform skeleton if asked, lowest joint of the clip on y = 0 unless
+    ``floor`` is False, root XZ of frame 0 at the origin, facing +Z at frame 0);
+    ``recover_from_ric(features) ~ canonical_joints[:-1]``.
     Raises ShapeError for a wrong shape, NaN/inf values or fewer than 2 frames.
     """
-    out = _extract(joints, uniform=uniform, feet_thre=feet_thre)
+    out = _extract(joints, uniform=uniform, feet_thre=feet_thre, floor=floor)
     return out.features.astype(np.float32), out.canonical.astype(np.float32)
 
 
-def _extract(joints: np.ndarray, *, uniform: bool, feet_thre: float) -> _Extracted:
+def raise_features(features: Array, dy: float) -> Array:
+    """The motion of ``features`` moved up by ``dy`` metres (down for dy < 0).
+
+    features: (..., T, D) numpy array or torch tensor, D = 263 or 329. Only the absolute heights move (root
+    y and the ric block's y); every other dim is a velocity, a rotation, a contact or an acceleration,
+    which a vertical shift leaves as they are. Returns a new array of the same type and dtype.
+    """
+    ops = _ops_for(features, SLICES["ric"].stop)
+    out = features.clone() if ops.torch else np.array(features, copy=True)
+    out[..., _HEIGHT_DIMS] += dy
+    return out
+
+
+def _extract(joints: np.ndarray, *, uniform: bool, feet_thre: float, floor: bool = True) -> _Extracted:
     pos = _checked_joints(joints)
     if uniform:
         pos = _uniform_skeleton(pos, UNIFORM_OFFSETS)
-    pos = _canonicalise(pos)
+    pos = _canonicalise(pos, floor)
 
     step2 = np.sum((pos[1:, list(FOOT_JOINTS)] - pos[:-1, list(FOOT_JOINTS)]) ** 2, axis=-1)  # (T-1, 4)
     contacts = (step2 < feet_thre).astype(np.float64)
@@ -221,10 +242,11 @@ def _uniform_skeleton(pos: np.ndarray, target_offsets: np.ndarray) -> np.ndarray
     return out
 
 
-def _canonicalise(pos: np.ndarray) -> np.ndarray:
-    """Lowest joint of the clip on y = 0, root XZ of frame 0 at the origin, frame 0 facing +Z."""
+def _canonicalise(pos: np.ndarray, floor: bool = True) -> np.ndarray:
+    """Lowest joint of the clip on y = 0 (if ``floor``), root XZ of frame 0 at the origin, frame 0 facing +Z."""
     pos = pos.copy()
-    pos[..., 1] -= pos[..., 1].min()
+    if floor:
+        pos[..., 1] -= pos[..., 1].min()
     pos -= pos[0, 0] * np.array([1.0, 0.0, 1.0])
     fwd = facing_direction(pos[0])  # process_file's correct (r_hip - l_hip) + (r_sdr - l_sdr) order
     return _rot_y(-np.arctan2(fwd[0], fwd[2]), pos)

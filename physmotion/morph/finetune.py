@@ -21,12 +21,13 @@ import numpy as np
 import torch
 
 from physmotion.checkpoint import CONFIG_FILE, WEIGHTS_FILE, weights_sha256
-from physmotion.conventions import MAX_FRAMES, MIN_FRAMES
+from physmotion.conventions import FLOOR_SURFACE, FLOORS, MAX_FRAMES, MIN_FRAMES
 from physmotion.data.dataset import MotionDataset, MotionItem, collate
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.train import TrainConfig, TrainResult, masked_mse, train_denoiser
 from physmotion.errors import PhysmotionError
 from physmotion.features.normalize import Normalizer
+from physmotion.morph.floor import on_surface, selected_on_surface
 from physmotion.morph.selection import TAU, Selection, read_synth_info, select
 from physmotion.training import seeded_generator
 
@@ -59,6 +60,10 @@ class FinetuneConfig:
     warmup: int | None = None
     device: str = "cpu"
     bf16: bool | None = None
+    # Floor convention of the training motions, and so of the fine-tuned model's samples: the soles on
+    # the floor where P put them (FLOOR_SURFACE), or HumanML3D's lowest joint on y = 0 (FLOOR_JOINTS, as
+    # the base model's data). docs/decisions.md: "Morph fine-tuning on the physical floor".
+    floor: str = FLOOR_SURFACE
 
 
 @dataclass
@@ -177,8 +182,11 @@ def _licence_tags(*groups) -> list[str]:
     return sorted(tags) or ["unknown"]
 
 
-def _prepare(config: FinetuneConfig) -> tuple[MotionDiffusion, TrainConfig, MixedDataset, dict, Selection, int]:
+def _prepare(config: FinetuneConfig, progress: bool = False
+             ) -> tuple[MotionDiffusion, TrainConfig, MixedDataset, dict, Selection, int]:  # fmt: skip
     """Every check and load of a run, before anything is written."""
+    if config.floor not in FLOORS:
+        raise FinetuneError(f"--floor must be one of {', '.join(FLOORS)}, got {config.floor!r}")
     if not 0.0 < config.mix <= 1.0:
         raise FinetuneError(f"--mix must be in (0, 1] (the synthetic share of a batch), got {config.mix}")
     if not config.lr > 0 or config.steps < 1:
@@ -188,6 +196,10 @@ def _prepare(config: FinetuneConfig) -> tuple[MotionDiffusion, TrainConfig, Mixe
     check_synth(config.synth, model_dir, model)
     selection = select(config.synth, config.tau)
     items = selected_items(selection, model.denoiser.feature_dim, model.denoiser.max_frames)
+    if config.floor == FLOOR_SURFACE:
+        refined = {s.id: s.features_path.parent.parent / "new_joints" / s.features_path.name
+                   for s in selection.items if s.source == "refined"}  # fmt: skip
+        items = selected_on_surface(items, refined, progress)
     base_train = model.info.get("train", {})
     given = {"batch_size": config.batch_size, "warmup": config.warmup}
     train = {k: base_train[k] for k in INHERITED if k in base_train} | {k: v for k, v in given.items() if v is not None}
@@ -205,6 +217,8 @@ def _prepare(config: FinetuneConfig) -> tuple[MotionDiffusion, TrainConfig, Mixe
         dim = real.items[0].features.shape[-1]
         if dim != model.denoiser.feature_dim:
             raise FinetuneError(f"{config.data} holds {dim}-d features; the model takes {model.denoiser.feature_dim}-d")
+        if config.floor == FLOOR_SURFACE:
+            real.items = on_surface(real.items, progress, "grounding real motions")
         build_info = Path(config.data) / "build_info.json"
         data_tags = json.loads(build_info.read_text()).get("licence_tags", []) if build_info.is_file() else ["unknown"]
     dataset = MixedDataset(synth, real, config.mix)
@@ -214,6 +228,7 @@ def _prepare(config: FinetuneConfig) -> tuple[MotionDiffusion, TrainConfig, Mixe
         # Union of the generator's, the synthetic items' and the real data's tags: an NC clip anywhere
         # behind the weights keeps the fine-tuned model NC.
         "licence_tags": _licence_tags(model.info.get("licence_tags"), selection.licence_tags, data_tags),
+        "floor": config.floor,
         "morph": {"base_model": str(model_dir), "base_model_sha256": weights_sha256(model_dir),
                   "synth": str(config.synth), "rounds": rounds,
                   "selected": {"refined": selection.counts.get("refined", 0),
@@ -233,7 +248,7 @@ def finetune(config: FinetuneConfig, resume: bool = False, progress: bool = True
     Every check runs before anything is written: a model folder without config or weights, a synthetic
     folder made by another model or for another skeleton or feature width, or an empty selection raise
     FinetuneError (or the selection's SelectionError) and leave ``config.out`` as it was."""
-    model, cfg, dataset, info, selection, rounds = _prepare(config)
+    model, cfg, dataset, info, selection, rounds = _prepare(config, progress)
     result = train_denoiser(cfg, resume=resume, progress=progress, init=model, dataset=dataset, info=info)
     return FinetuneResult(train=result, selection=selection, synthetic_items=len(dataset.synth),
                           real_items=len(dataset.real) if dataset.real is not None else 0, rounds=rounds)  # fmt: skip

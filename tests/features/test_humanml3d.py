@@ -12,6 +12,7 @@ from physmotion.features.humanml3d import (
     UNIFORM_OFFSETS,
     extract_features,
     mirror_features,
+    raise_features,
     recover_from_ric,
     recover_from_rot,
     recover_root_rot_pos,
@@ -194,6 +195,28 @@ def test_round_trip_recover_from_ric(walk: np.ndarray) -> None:
     print(f"\nround trip recover_from_ric: mean {err.mean() * 1e3:.2e} mm, max {err.max() * 1e3:.2e} mm")
     assert err.mean() < 1e-3  # the issue's bound (1 mm)
     assert err.max() < 1e-5  # what float32 features actually give
+
+
+def test_floor_false_keeps_the_heights(walk: np.ndarray) -> None:
+    # The features store absolute heights: without the re-flooring, a motion 3 cm above HumanML3D's floor
+    # comes back 3 cm above it, and everything but the heights is the floored features' own.
+    floored, canon = extract_features(walk)
+    lifted = walk - np.array([0.0, walk[..., 1].min() - 0.03, 0.0])  # lowest joint at y = 3 cm
+    kept, kept_canon = extract_features(lifted, floor=False)
+    np.testing.assert_allclose(kept_canon[..., 1], canon[..., 1] + 0.03, atol=1e-6)
+    np.testing.assert_allclose(recover_from_ric(kept), kept_canon[:-1], atol=1e-5)
+    np.testing.assert_allclose(kept, raise_features(floored, 0.03), atol=1e-6)
+
+
+def test_raise_features_moves_only_the_heights(walk: np.ndarray) -> None:
+    feats, _ = extract_features(walk)
+    up = raise_features(feats, 0.025)
+    moved = np.abs(up - feats).max(axis=0) > 1e-6
+    assert moved.sum() == NUM_JOINTS  # root y and the 21 ric heights, nothing else
+    np.testing.assert_allclose(recover_from_ric(up), recover_from_ric(feats) + [0.0, 0.025, 0.0], atol=1e-6)
+    as_torch = raise_features(torch.from_numpy(feats), 0.025)
+    assert isinstance(as_torch, torch.Tensor) and np.allclose(as_torch.numpy(), up)
+    assert np.array_equal(feats, extract_features(walk)[0])  # the input is not changed
 
 
 @pytest.mark.parametrize("clip", [make_spin(), make_walk(200, turn_deg=400.0)])
