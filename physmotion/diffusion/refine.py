@@ -30,13 +30,15 @@ import numpy as np
 import torch
 from scipy.signal import butter, filtfilt
 
-from physmotion.conventions import FPS, MIN_FRAMES
+from physmotion.conventions import FLOOR_SURFACE, FPS, MIN_FRAMES
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.physdiff import joints_to_features
 from physmotion.diffusion.samplers import SamplerConfig, default_sampler, guided_x0
 from physmotion.diffusion.schedule import DiffusionConfig, sampling_scheduler
 from physmotion.errors import PhysmotionError, ShapeError
-from physmotion.features.humanml3d import recover_from_ric
+from physmotion.features.humanml3d import raise_features, recover_from_ric
+from physmotion.physics.humanoid import body_from_joints
+from physmotion.physics.surface import surface_lift
 from physmotion.skeleton import facing_direction
 from physmotion.text.encoder import load_text_encoder
 
@@ -106,6 +108,9 @@ def refine(model: MotionDiffusion, joints: np.ndarray, fps: float, config: Refin
     pos = check_motion(joints, fps, model)
     dim = model.denoiser.feature_dim
     feats = joints_to_features(pos, dim)  # T rows: the last one extrapolated (physdiff's convention)
+    if model.floor == FLOOR_SURFACE:  # a model that learned the soles on the floor sees the input so too
+        lowest = recover_from_ric(feats.astype(np.float64))
+        feats = raise_features(feats, surface_lift(lowest, body_from_joints(lowest)))
     # the input as the features hold it (canonical frame; the extrapolated frame can move the floor)
     canonical = recover_from_ric(feats.astype(np.float64))
     rot, shift = _yaw_fit(canonical, pos)

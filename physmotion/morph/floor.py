@@ -30,14 +30,15 @@ _CHUNK = 32  # motions per worker batch between progress updates
 _LIFTS: dict[str, float] = {}  # sha1 of a motion's features -> its surface lift (m)
 
 
-def surface_lift(features: np.ndarray) -> float:
-    """Metres by which a motion in the data convention must rise for the humanoid's soles to stand on the
-    floor (the shift :func:`ground_on_surface` applies). features: (T, 263 or 329), not normalised."""
-    from physmotion.physics.surface import ground_on_surface
+def features_lift(features: np.ndarray) -> float:
+    """Metres by which the motion of ``features`` (T, 263 or 329; not normalised) must rise for the
+    humanoid's soles to stand on the floor (:func:`~physmotion.physics.surface.surface_lift`, on the body
+    fitted to the motion)."""
+    from physmotion.physics.humanoid import body_from_joints
+    from physmotion.physics.surface import surface_lift
 
     joints = recover_from_ric(np.asarray(features[:, :FEATURE_DIM], dtype=np.float64))
-    grounded, _ = ground_on_surface(joints)
-    return float(grounded[0, 0, 1] - joints[0, 0, 1])
+    return surface_lift(joints, body_from_joints(joints))
 
 
 def simulated_features(joints_path: Path) -> np.ndarray:
@@ -61,7 +62,7 @@ def on_surface(items: Sequence[MotionItem], progress: bool = False, label: str =
         task = bar.add_task(label, total=len(todo))
         for start in range(0, len(todo), _CHUNK):
             chunk = todo[start : start + _CHUNK]
-            _LIFTS.update(zip(chunk, map_in_workers(surface_lift, [features[k] for k in chunk])))
+            _LIFTS.update(zip(chunk, map_in_workers(features_lift, [features[k] for k in chunk])))
             bar.advance(task, len(chunk))
     return [replace(it, features=raise_features(it.features, _LIFTS[k])) for it, k in zip(items, keys)]
 

@@ -141,31 +141,38 @@ def ground_on_surface(
     joints: np.ndarray, body: np.ndarray | None = None, config: HumanoidConfig | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """A motion moved up or down by the constant that leaves the least Phys-Err on the humanoid's
-    surface: the best a constant shift can do, and the physical metrics' floor convention
-    (:mod:`physmotion.metrics.physical`).
-
-    Why not "the lowest point over the clip on the floor": the box feet dip their corners 15-30 mm below
-    the flat stance at heel strikes and toe-offs, so on captured walks that floor leaves the stance foot
-    floating (test split: Float 23 mm, Phys-Err 23 mm; docs/decisions.md: "floor convention"). The
-    candidates are the 0th to 50th percentiles of the per-frame lowest surface point.
+    surface (:func:`surface_lift`): the best a constant shift can do, and the physical metrics' floor
+    convention (:mod:`physmotion.metrics.physical`).
 
     joints: (T, 22, 3) metres, Y up, e.g. in the data convention (lowest joint at y = 0, which leaves
     the soles ~1.5-2 cm under the floor). body: the humanoid's rest offsets (22, 3), estimated from the
     joints if None. Returns (joints shifted, same dtype; the body used), so the motion can be measured on
     the very body it was grounded with.
     """
-    from physmotion.metrics.physical import phys_err
-
     x = np.asarray(joints)
     if x.ndim != 3 or x.shape[1:] != (NUM_JOINTS, 3):
         raise ShapeError(f"joints must be (T, 22, 3), got {x.shape}")
     body = body_from_joints(x) if body is None else np.asarray(body, dtype=np.float64)
-    surface = HumanoidSurface(body, config)
-    x64 = x.astype(np.float64)
+    return (x + np.array([0.0, surface_lift(x, body, config), 0.0])).astype(x.dtype), body
+
+
+def surface_lift(joints: np.ndarray, body: np.ndarray, config: HumanoidConfig | None = None) -> float:
+    """Metres to move a motion up (down if negative) for the least Phys-Err on the humanoid's surface.
+
+    Why not "the lowest point over the clip on the floor": the box feet dip their corners 15-30 mm below
+    the flat stance at heel strikes and toe-offs, so on captured walks that floor leaves the stance foot
+    floating (test split: Float 23 mm, Phys-Err 23 mm; docs/decisions.md: "floor convention"). The
+    candidates are the 0th to 50th percentiles of the per-frame lowest surface point.
+    joints: (T, 22, 3) metres, Y up; body: the humanoid's rest offsets (22, 3).
+    """
+    from physmotion.metrics.physical import phys_err
+
+    surface = HumanoidSurface(np.asarray(body, dtype=np.float64), config)
+    x64 = np.asarray(joints, dtype=np.float64)
     low = surface.lowest_height(x64)
     up = np.zeros(3)
     best = (np.inf, 0.0)
     for floor in np.unique(np.percentile(low, _GROUNDING_PERCENTILES)):
         up[1] = floor
         best = min(best, (phys_err(x64 - up, body=surface), floor))
-    return (x - np.array([0.0, best[1], 0.0])).astype(x.dtype), body
+    return -float(best[1])

@@ -57,6 +57,17 @@ def test_strength_zero_returns_the_input(model, clean):
     assert _mpjpe_mm(out, clean) < 0.1
 
 
+def test_surface_floor_model_returns_the_input_at_strength_zero(model, clean):
+    # A model fine-tuned on the physical floor sees the input raised onto the soles; the output goes back
+    # into the input's frame, heights included.
+    from dataclasses import replace
+
+    from physmotion.conventions import FLOOR_SURFACE
+
+    surface = replace(model, info={**model.info, "floor": FLOOR_SURFACE})
+    assert _mpjpe_mm(refine(surface, clean, 20, RefineConfig(strength=0.0)), clean) < 0.1
+
+
 def test_one_step_keeps_the_pose_and_the_path(model, clean):
     out = refine(model, clean, 20, RefineConfig(strength=0.02))  # one of 50 steps
     assert out.shape == clean.shape and out.dtype == np.float32

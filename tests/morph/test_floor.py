@@ -18,7 +18,7 @@ from physmotion.errors import PhysmotionError
 from physmotion.features.humanml3d import SLICES, extract_features, recover_from_ric
 from physmotion.metrics.physical import phys_err
 from physmotion.morph.finetune import FinetuneConfig, finetune, selected_items
-from physmotion.morph.floor import on_surface, selected_on_surface, surface_lift
+from physmotion.morph.floor import on_surface, selected_on_surface, features_lift
 from physmotion.morph.selection import select
 from physmotion.physics.humanoid import body_from_joints
 from physmotion.physics.surface import HumanoidSurface
@@ -44,7 +44,7 @@ def test_captured_motions_rise_onto_the_soles(test_items) -> None:
     for before, after in zip(test_items, grounded):
         lift = float(after.features[0, ROOT_Y] - before.features[0, ROOT_Y])
         assert 0.01 < lift < 0.06, (before.id, lift)
-        assert lift == pytest.approx(surface_lift(before.features), abs=1e-6)
+        assert lift == pytest.approx(features_lift(before.features), abs=1e-6)
         joints = recover_from_ric(before.features.astype(np.float64))
         body = HumanoidSurface(body_from_joints(joints))
         up = recover_from_ric(after.features.astype(np.float64))
@@ -65,7 +65,7 @@ def test_refined_keep_the_simulated_heights_and_inputs_are_grounded(synth_dir: P
             np.testing.assert_array_equal(after.features, extract_features(sim, floor=False)[0])
         else:
             lift = after.features[:, ROOT_Y] - before.features[:, ROOT_Y]
-            assert np.allclose(lift, surface_lift(before.features), atol=1e-6) and lift[0] > 0.01
+            assert np.allclose(lift, features_lift(before.features), atol=1e-6) and lift[0] > 0.01
 
 
 def test_finetuned_model_records_its_floor(tiny_model_dir, synth_dir, built_dir, tmp_path) -> None:
