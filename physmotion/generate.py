@@ -133,7 +133,8 @@ def generate(
         residuals = list(projector.last_residuals)
     if mode.kind == POST:
         for k in range(mode.projections):
-            joints = projector.project_joints([on_data_floor(j) for j in joints] if k else projector.data_floor(joints))
+            given = [on_data_floor(j) for j in joints] if k else projector.data_floor(joints)
+            joints = projector.project_joints(given)
             bodies, resets = list(projector.last_bodies), projector.last_resets
             residuals = list(projector.last_residuals)
             if on_step:

@@ -8,6 +8,8 @@ imitated it, else the generated input. Each batch holds a fixed share ``mix`` of
 rest drawn from the real train split, so the model does not drift from the data it was trained on.
 
 Features are normalised with the *model's* Mean/Std: the network's input space must not move under it.
+By default every motion stands with the humanoid's soles on the floor (:mod:`physmotion.morph.floor`), so
+the fine-tuned model learns where P puts the feet; the model records that convention (``info["floor"]``).
 The output folder is a training run (model, ``train_state.pt``, ``loss.csv``) and resumes exactly.
 """
 

@@ -149,8 +149,9 @@ def test_help_defaults_are_the_dataclasses() -> None:
 
     ft, syn = FinetuneConfig(model="", synth="", data="", out=""), SynthConfig()
     stated = _help_defaults("morph", "finetune")
-    expected = {"mix": ft.mix, "lr": ft.lr, "steps": ft.steps, "tau": ft.tau, "seed": ft.seed}
+    expected = {"mix": ft.mix, "lr": ft.lr, "steps": ft.steps, "tau": ft.tau, "seed": ft.seed, "floor": ft.floor}
     assert {k: v for k, v in stated.items() if k != "batch-size"} == {k: str(v) for k, v in expected.items()}
     stated = _help_defaults("morph", "run")
-    expected = {"per-caption": syn.per_caption, "steps": ft.steps, "mix": ft.mix, "lr": ft.lr, "seed": ft.seed}
+    expected = {"per-caption": syn.per_caption, "steps": ft.steps, "mix": ft.mix, "lr": ft.lr, "seed": ft.seed,
+                "floor": ft.floor}
     assert stated == {k: str(v) for k, v in expected.items()}

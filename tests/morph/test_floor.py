@@ -100,9 +100,3 @@ def test_projection_input_is_the_data_convention(tiny_model, test_items) -> None
     surface_model = replace(tiny_model, info={**tiny_model.info, "floor": FLOOR_SURFACE})
     for back, j in zip(FeatureProjector(surface_model).data_floor(lifted), joints):
         np.testing.assert_allclose(back, j - [0.0, j[..., 1].min(), 0.0], atol=1e-9)
-
-
-def test_cli_floor_default_is_the_dataclass() -> None:
-    from physmotion.cli import FLOOR_HELP
-
-    assert FLOOR_HELP.endswith(f"(default: {FinetuneConfig.floor}).")
