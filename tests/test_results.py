@@ -79,16 +79,21 @@ def schedule_quotes() -> list[str]:
 
 
 def morph_quotes() -> list[str]:
-    """Morph's table (results/morph.json, scripts/morph_table.py) as the README and the Morph card quote it."""
+    """Morph's table (results/morph.json, scripts/morph_table.py) as the README and the Morph card quote it:
+    each figure from the base model through every round in the table."""
     rows = _load("morph.json")["rows"]
+    models = ["base"] + sorted({r.rsplit(" ", 1)[0] for r in rows if r.startswith("round ")})
     err = {r: rows[r]["phys_err"]["mean"] for r in rows if r != "real"}
+
+    def chain(mode: str, values: dict, fmt: str) -> str:
+        return " -> ".join(format(values[f"{m} {mode}"], fmt) for m in models)
+
     fid = {r: rows[r]["FID"]["mean"] for r in rows if r != "real"}
     return [
-        f"none {err['base none']:.1f} -> {err['round 1 none']:.1f} -> {err['round 2 none']:.1f} mm",
-        f"none+floor {err['base none+floor']:.1f} -> {err['round 1 none+floor']:.1f} -> "
-        f"{err['round 2 none+floor']:.1f} mm",
-        f"morph {err['base morph']:.1f} -> {err['round 1 morph']:.1f} -> {err['round 2 morph']:.1f} mm",
-        f"FID {fid['base none']:.3f} -> {fid['round 1 none']:.3f} -> {fid['round 2 none']:.3f}",
+        f"none {chain('none', err, '.1f')} mm",
+        f"none+floor {chain('none+floor', err, '.1f')} mm",
+        f"morph {chain('morph', err, '.1f')} mm",
+        f"FID {chain('none', fid, '.3f')}",
         f"PhysDiff {err['base ' + PHYSDIFF]:.1f} mm",
     ]
 

@@ -4,6 +4,7 @@ from pathlib import Path
 
 import numpy as np
 
+from physmotion.conventions import FLOOR_SURFACE
 from physmotion.diffusion.model import DEFAULT_MODEL_DIR, MotionDiffusion
 from physmotion.generate import GenerateConfig, generate
 from physmotion.text.vocabulary import load_vocabulary
@@ -14,7 +15,8 @@ MORPH_DIR = Path(DEFAULT_MODEL_DIR).parent / "morph"
 def test_morph_model_card_facts_and_generation() -> None:
     model = MotionDiffusion.load(MORPH_DIR)
     info = model.info["morph"]
-    assert info["rounds"] == 1 and info["selected"] == {"refined": 364, "input": 53}  # round 1 ships
+    assert info["rounds"] == 1 and info["selected"] == {"refined": 365, "input": 52}  # round 1 ships
+    assert model.floor == FLOOR_SURFACE  # fine-tuned with the soles on the floor
     assert model.licence_tag == "NC" and "NC" in model.info["licence_tags"]  # the base's NC data carries through
     vocabulary = load_vocabulary(MORPH_DIR)
     assert vocabulary is not None and load_vocabulary(DEFAULT_MODEL_DIR) <= vocabulary
