@@ -41,21 +41,22 @@ from physmotion.eval.table import table_paths
 from physmotion.motion import write_atomic
 
 
-def train_runs(args: argparse.Namespace) -> dict[str, MotionDiffusion]:
-    """Train (or reuse, or resume) every run the rows need; returns the loaded models."""
+def train_runs(args: argparse.Namespace, only: str | None = None) -> dict[str, MotionDiffusion]:
+    """Train (or reuse, or resume) every run the rows need (or the run ``only``); returns the loaded models,
+    on ``args.device``."""
     models = {}
-    for run in dict.fromkeys(r.run for r in ROWS):
+    for run in [only] if only else dict.fromkeys(r.run for r in ROWS):
         out = Path(args.runs) / run
         spec = RUNS[run]
         data = args.data if spec["features"] == 263 else args.data329
         den = DenoiserConfig(arch=spec["arch"], d_model=args.d_model, layers=args.layers)
         cfg = TrainConfig(data=str(data), out=str(out), denoiser=den, crop=args.crop, batch_size=args.batch,
-                          steps=args.steps, seed=args.seed, phys_drop=spec["phys_drop"])  # fmt: skip
+                          steps=args.steps, seed=args.seed, phys_drop=spec["phys_drop"], device=args.device)  # fmt: skip
         done = (out / "config.json").is_file() and MotionDiffusion.load(out).info.get("steps") == args.steps
         if not done:
             print(f"training {run} to step {args.steps} in {out}", file=sys.stderr)
             train_denoiser(cfg, resume=(out / STATE_FILE).is_file(), progress=sys.stderr.isatty())
-        models[run] = MotionDiffusion.load(out)
+        models[run] = MotionDiffusion.load(out, device=args.device)
     return models
 
 
@@ -96,9 +97,14 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--speed-repeats", type=int, default=1, help="repeats of each Table 6 row")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--device", default="cpu", help="where to train and sample: cpu or cuda")
+    parser.add_argument("--train-only", choices=list(RUNS), default=None,
+                        help="train this one run and stop (several runs can then train side by side)")
     args = parser.parse_args()
 
-    models = train_runs(args)
+    models = train_runs(args, args.train_only)
+    if args.train_only:
+        return
     evaluator = Evaluator.load(args.evaluator)
     rows, real = {}, None
     for row in ROWS:
@@ -122,6 +128,7 @@ def main() -> None:
             "layers": args.layers,
             "crop": args.crop,
             "batch": args.batch,
+            "device": args.device,
             "repeats": args.repeats,
             "speed_repeats": args.speed_repeats,
             "seed": args.seed,

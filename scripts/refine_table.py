@@ -76,8 +76,9 @@ def test_ids(data: Path, limit: int | None) -> list[str]:
     return ids[:limit] if limit else ids
 
 
-def run_table(data: Path, limit: int | None, seed: int, model_dir: Path | None = None) -> tuple[list[dict], dict]:
-    model = MotionDiffusion.load(model_dir)
+def run_table(data: Path, limit: int | None, seed: int, model_dir: Path | None = None,
+              strengths: tuple[float, ...] = STRENGTHS, device: str = "cpu") -> tuple[list[dict], dict]:  # fmt: skip
+    model = MotionDiffusion.load(model_dir, device=device)
     ids = test_ids(data, limit)
     rows: dict[str, list[dict[str, float]]] = {}
     clean_rows: list[dict[str, float]] = []
@@ -88,7 +89,7 @@ def run_table(data: Path, limit: int | None, seed: int, model_dir: Path | None =
         for sigma in SIGMAS_CM:
             noisy = jitter(clean, sigma / 100, rng)
             variants = {"noisy input": noisy, f"low-pass {CUTOFF_HZ:g} Hz": low_pass(noisy)}
-            for s in STRENGTHS:
+            for s in strengths:
                 variants[f"refine {s:g}"] = refine(model, noisy, FPS, RefineConfig(strength=s)).astype(np.float64)
             for name, joints in variants.items():
                 rows.setdefault(f"{sigma:g} cm | {name}", []).append(measure(joints, clean))
@@ -100,7 +101,7 @@ def run_table(data: Path, limit: int | None, seed: int, model_dir: Path | None =
         arch += f", physics guidance {default_sampler(model).phys_scale:g}"
     name = "the shipped model" if model_dir is None else str(model_dir)
     meta = {"clips": len(ids), "ids": ids, "seed": seed, "sigmas_cm": list(SIGMAS_CM), "drop_share": DROP_SHARE,
-            "strengths": list(STRENGTHS), "low_pass": f"Butterworth order 4, {CUTOFF_HZ:g} Hz, filtfilt",
+            "strengths": list(strengths), "device": device, "low_pass": f"Butterworth order 4, {CUTOFF_HZ:g} Hz, filtfilt",
             "refine": f"no caption, 50 DDIM steps, {name} ({arch})", "fps": FPS}  # fmt: skip
     return table, meta
 
@@ -131,9 +132,13 @@ def main() -> None:
     parser.add_argument("--limit", type=int, default=None, help="at most this many clips (default all)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--model", type=Path, default=None, help="model folder (default: the shipped model)")
+    parser.add_argument("--strengths", default=",".join(f"{s:g}" for s in STRENGTHS),
+                        help="comma-separated refine strengths (default: %(default)s)")
+    parser.add_argument("--device", default="cpu", help="where the model runs: cpu or cuda")
     args = parser.parse_args()
+    strengths = tuple(float(s) for s in args.strengths.split(","))
     t0 = time.time()
-    table, meta = run_table(args.data, args.limit, args.seed, args.model)
+    table, meta = run_table(args.data, args.limit, args.seed, args.model, strengths, args.device)
     meta["seconds"] = round(time.time() - t0, 1)
     md = to_markdown(table, meta)
     js = json.dumps({"meta": meta, "rows": table}, indent=2) + "\n"

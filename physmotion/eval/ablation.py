@@ -87,10 +87,10 @@ def evaluate_row(
 
 
 def separated(a: Row, b: Row, columns: tuple[str, ...]) -> dict[str, str]:
-    """For each column, ">" or "<" when b's mean lies above or below a's and the two 95 % intervals do not
-    overlap, else "~" (within the noise of ``repeats`` runs)."""
+    """For each column both rows have, ">" or "<" when b's mean lies above or below a's and the two 95 %
+    intervals do not overlap, else "~" (within the noise of ``repeats`` runs)."""
     out = {}
-    for col in columns:
+    for col in (c for c in columns if c in a and c in b):  # MModality needs 2+ repeats
         (ma, ha), (mb, hb) = a[col], b[col]
         out[col] = ">" if mb - hb > ma + ha else "<" if mb + hb < ma - ha else "~"
     return out

@@ -23,6 +23,8 @@ def test_separated_needs_disjoint_intervals():
     a = {"x": (1.0, 0.1), "y": (1.0, 0.1), "z": (1.0, 0.1)}
     b = {"x": (1.3, 0.1), "y": (0.85, 0.1), "z": (0.75, 0.1)}
     assert separated(a, b, ("x", "y", "z")) == {"x": ">", "y": "~", "z": "<"}
+    # a column one row lacks (MModality of a 1-repeat run) is left out, not a KeyError
+    assert separated(a, {"x": b["x"]}, ("x", "y")) == {"x": ">"}
 
 
 def test_wins_follow_each_metrics_better_direction():
