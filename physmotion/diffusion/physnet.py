@@ -101,11 +101,15 @@ class PhysicalNetwork(nn.Module):
     def solve(d: torch.Tensor, v: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
         """M^-1 b for M = diag(d) + V V^T, by the Woodbury identity (an r x r solve instead of 66 x 66:
         the network evaluates it for every frame of every step, where a dense solve costs 100x more).
-        d, b: (..., 66), v: (..., 66, r)."""
-        dinv_b, dinv_v = b / d, v / d[..., None]
-        small = torch.eye(v.shape[-1], dtype=v.dtype, device=v.device) + v.transpose(-1, -2) @ dinv_v
-        y = torch.linalg.solve(small, (v.transpose(-1, -2) @ dinv_b[..., None]))
-        return dinv_b - (dinv_v @ y)[..., 0]
+        d, b: (..., 66), v: (..., 66, r). Computed in float32 whatever the autocast: the LU solve has no
+        bf16 kernel on CUDA, and a bf16 Woodbury correction would lose the small terms anyway."""
+        with torch.autocast(d.device.type, enabled=False):
+            wide = torch.promote_types(d.dtype, torch.float32)  # float64 stays float64
+            d, v, b = d.to(wide), v.to(wide), b.to(wide)
+            dinv_b, dinv_v = b / d, v / d[..., None]
+            small = torch.eye(v.shape[-1], dtype=v.dtype, device=v.device) + v.transpose(-1, -2) @ dinv_v
+            y = torch.linalg.solve(small, (v.transpose(-1, -2) @ dinv_b[..., None]))
+            return dinv_b - (dinv_v @ y)[..., 0]
 
     def forward(
         self, x: torch.Tensor, t: torch.Tensor, mask: torch.Tensor | None = None

@@ -62,6 +62,21 @@ def test_inertia_stays_positive_definite_when_the_diagonal_head_collapses() -> N
     assert float(eig.min()) > 0.5e-3
 
 
+def test_solve_runs_in_float32_under_bf16_autocast() -> None:
+    """bf16 training (a GPU's default) autocasts the network, and CUDA's LU solve has no bf16 kernel: the
+    solve leaves the autocast and works in float32 (the device run of 2026-11-26 failed there)."""
+    gen = torch.Generator().manual_seed(1)
+    d = torch.nn.functional.softplus(torch.randn(4, ACCEL_DIM, generator=gen)) + 1e-3
+    v = torch.randn(4, ACCEL_DIM, INERTIA_RANK, generator=gen)
+    b = torch.randn(4, ACCEL_DIM, generator=gen)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        x = PhysicalNetwork.solve(d.bfloat16(), v.bfloat16(), b.bfloat16())
+    assert x.dtype == torch.float32
+    m = PhysicalNetwork.inertia_matrix(d.bfloat16().float(), v.bfloat16().float())
+    dense = torch.linalg.solve(m, b.bfloat16().float()[..., None])[..., 0]
+    torch.testing.assert_close(x, dense, rtol=1e-4, atol=1e-4)
+
+
 def test_woodbury_solve_equals_the_dense_solve() -> None:
     gen = torch.Generator().manual_seed(0)
     d = torch.nn.functional.softplus(torch.randn(6, ACCEL_DIM, generator=gen, dtype=torch.float64)) + 1e-3
