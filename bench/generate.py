@@ -1,11 +1,14 @@
 """Generation wall time by physics mode, one table from one run (compare the ratios).
 
-Usage: python bench/generate.py [--model DIR] [--biomo DIR] [--seconds 6] [--repeats 2]
+Usage: python bench/generate.py [--model DIR] [--morph DIR] [--biomo DIR] [--seconds 6] [--repeats 2]
 Modes: none, morph (Morph's inference: pre-processing, one P, imitation selection), post:4 (as many
 projections as PhysDiff's default) and physdiff:end:4,space:1; batches of 1
 and 16 motions (one caption each, from the physics prompt set); 50 DDIM steps, CFG 2.5. The model and the
 text encoder are loaded and warmed up once before timing; each time is the best of ``--repeats`` rounds.
 PhysDiff reports 2.5x none at batch 1.
+
+With ``--morph DIR`` (a Morph-tuned model) two rows time it in modes none and morph, beside the base
+model's: Morph's claim is plain sampling at the base model's cost, and one P instead of PhysDiff's four.
 
 With ``--biomo DIR`` (a BioMoDiffuse model, e.g. ``runs/biomo_ablation/biomo`` from
 ``scripts/biomodiffuse_table.py``) a row times it without projection at its own sampler (SDE DPM-Solver++,
@@ -39,6 +42,7 @@ from physmotion.generate import GenerateConfig, generate
 MODES = ("none", "morph", "post:4", "physdiff:end:4,space:1")  # morph: Morph's inference, one P
 PHYSDIFF = MODES[-1]
 BIOMO = "BioMoDiffuse none (dpmpp-sde 10 steps)"
+MORPH_MODES = ("none", "morph")  # a Morph-tuned model: plain sampling and Morph's inference
 
 
 @contextmanager
@@ -66,6 +70,8 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=6.0)
     parser.add_argument("--repeats", type=int, default=2, help="rounds over all modes; the best time counts")
     parser.add_argument("--biomo", default=None, help="a BioMoDiffuse model folder to time beside the others")
+    parser.add_argument("--morph", default=None,
+                        help="a Morph-tuned model folder (e.g. physmotion/models/morph) to time in modes none, morph")
     args = parser.parse_args()
     model = MotionDiffusion.load(args.model)
     base = GenerateConfig(seconds=args.seconds)
@@ -75,6 +81,11 @@ def main() -> None:
         biomo = MotionDiffusion.load(args.biomo)
         runs[BIOMO] = (biomo, replace(base, physics="none", sampler=default_sampler(biomo)))
         generate(PHYSICS_PROMPTS[:1], runs[BIOMO][1], biomo)
+    if args.morph:
+        tuned = MotionDiffusion.load(args.morph)
+        for mode in MORPH_MODES:
+            runs[f"Morph-tuned {mode}"] = (tuned, replace(base, physics=mode))
+        generate(PHYSICS_PROMPTS[:1], replace(base, physics="none"), tuned)
     times: dict[tuple[str, int], float] = {}
     stepping = 0.0  # mj_step seconds inside the best PhysDiff run at batch 1
     # Rounds interleave the modes, so a slow spell of the shared machine hits all of them alike.
