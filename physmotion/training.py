@@ -16,9 +16,10 @@ import torch
 from physmotion.errors import PhysmotionError
 
 
-def seeded_generator(seed: int, *key: int) -> torch.Generator:
-    """A torch generator for the stream named by ``(seed, *key)``."""
-    return torch.Generator().manual_seed(int(np.random.SeedSequence([seed, *key]).generate_state(1)[0]))
+def seeded_generator(seed: int, *key: int, device: torch.device | str = "cpu") -> torch.Generator:
+    """A torch generator on ``device`` for the stream named by ``(seed, *key)``."""
+    state = int(np.random.SeedSequence([seed, *key]).generate_state(1)[0])
+    return torch.Generator(device=device).manual_seed(state)
 
 
 def bf16_helps(device: str) -> bool:

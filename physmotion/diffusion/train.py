@@ -212,10 +212,14 @@ def train_denoiser(
         text = encoder.encode(batch["text"]).to(accel.device)
         g = seeded_generator(cfg.seed, 2, step)
         t = torch.randint(0, cfg.diffusion.num_train_timesteps, (len(idx),), generator=g)
-        noise = torch.randn(x0.shape, generator=g)
+        if accel.device.type == "cpu":
+            noise = torch.randn(x0.shape, generator=g)
+        else:  # drawn on the device: 1.2x faster steps on an H200 (decisions "the BioMoDiffuse ablation on a GPU")
+            noise = torch.randn(x0.shape, generator=seeded_generator(cfg.seed, 3, step, device=accel.device),
+                                device=accel.device)  # fmt: skip
         drop = torch.rand(len(idx), generator=g) < cfg.text_drop
         drop_phys = (torch.rand(len(idx), generator=g) < cfg.phys_drop).to(accel.device) if biomo else None
-        xt = noise_sched.add_noise(x0.cpu(), noise, t).to(accel.device)
+        xt = noise_sched.add_noise(x0, noise, t.to(x0.device))
         seed_dropout(g)  # dropout masks of this step
         for group in opt.param_groups:
             group["lr"] = warmup_lr(cfg.lr, cfg.warmup, step)
