@@ -51,7 +51,8 @@ def train_runs(args: argparse.Namespace, only: str | None = None) -> dict[str, M
         data = args.data if spec["features"] == 263 else args.data329
         den = DenoiserConfig(arch=spec["arch"], d_model=args.d_model, layers=args.layers)
         cfg = TrainConfig(data=str(data), out=str(out), denoiser=den, crop=args.crop, batch_size=args.batch,
-                          steps=args.steps, seed=args.seed, phys_drop=spec["phys_drop"], device=args.device)  # fmt: skip
+                          steps=args.steps, seed=args.seed, phys_drop=spec["phys_drop"],
+                          device=args.device)  # fmt: skip
         done = (out / "config.json").is_file() and MotionDiffusion.load(out).info.get("steps") == args.steps
         if not done:
             print(f"training {run} to step {args.steps} in {out}", file=sys.stderr)

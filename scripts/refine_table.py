@@ -77,7 +77,8 @@ def test_ids(data: Path, limit: int | None) -> list[str]:
 
 
 def run_table(data: Path, limit: int | None, seed: int, model_dir: Path | None = None,
-              strengths: tuple[float, ...] = STRENGTHS, device: str = "cpu") -> tuple[list[dict], dict]:  # fmt: skip
+              strengths: tuple[float, ...] = STRENGTHS, device: str = "cpu",
+              ) -> tuple[list[dict], dict]:  # fmt: skip
     model = MotionDiffusion.load(model_dir, device=device)
     ids = test_ids(data, limit)
     rows: dict[str, list[dict[str, float]]] = {}
@@ -101,7 +102,8 @@ def run_table(data: Path, limit: int | None, seed: int, model_dir: Path | None =
         arch += f", physics guidance {default_sampler(model).phys_scale:g}"
     name = "the shipped model" if model_dir is None else str(model_dir)
     meta = {"clips": len(ids), "ids": ids, "seed": seed, "sigmas_cm": list(SIGMAS_CM), "drop_share": DROP_SHARE,
-            "strengths": list(strengths), "device": device, "low_pass": f"Butterworth order 4, {CUTOFF_HZ:g} Hz, filtfilt",
+            "strengths": list(strengths), "device": device,
+            "low_pass": f"Butterworth order 4, {CUTOFF_HZ:g} Hz, filtfilt",
             "refine": f"no caption, 50 DDIM steps, {name} ({arch})", "fps": FPS}  # fmt: skip
     return table, meta
 

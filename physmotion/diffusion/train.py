@@ -214,7 +214,7 @@ def train_denoiser(
         t = torch.randint(0, cfg.diffusion.num_train_timesteps, (len(idx),), generator=g)
         if accel.device.type == "cpu":
             noise = torch.randn(x0.shape, generator=g)
-        else:  # drawn on the device: 1.2x faster steps on an H200 (decisions "the BioMoDiffuse ablation on a GPU")
+        else:  # drawn on the device: 1.2x faster steps on an H200 (decisions "...ablation on a GPU")
             noise = torch.randn(x0.shape, generator=seeded_generator(cfg.seed, 3, step, device=accel.device),
                                 device=accel.device)  # fmt: skip
         drop = torch.rand(len(idx), generator=g) < cfg.text_drop
