@@ -64,7 +64,7 @@ def test_inertia_stays_positive_definite_when_the_diagonal_head_collapses() -> N
 
 def test_solve_runs_in_float32_under_bf16_autocast() -> None:
     """bf16 training (a GPU's default) autocasts the network, and CUDA's LU solve has no bf16 kernel: the
-    solve leaves the autocast and works in float32 (the device run of 2026-11-26 failed there)."""
+    solve leaves the autocast and works in float32 (decisions "the BioMoDiffuse ablation on a GPU")."""
     gen = torch.Generator().manual_seed(1)
     d = torch.nn.functional.softplus(torch.randn(4, ACCEL_DIM, generator=gen)) + 1e-3
     v = torch.randn(4, ACCEL_DIM, INERTIA_RANK, generator=gen)
