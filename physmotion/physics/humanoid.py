@@ -195,7 +195,9 @@ class HumanoidConfig:
     control_dt: float = 1.0 / 30.0  # PhysDiff's policy rate (Appendix C: 60 Hz sim, 30 Hz control)
     # The root residual is recomputed (in Python) every this many simulation steps and held between;
     # the steps in between run in one ``mj_step(nstep=...)`` call, in C, without the GIL.
-    residual_every: int = 4  # 90 Hz: as accurate as every step, fewer Python calls
+    # 180 Hz: held over 4 steps (90 Hz), the runs' tracking error grew by half once the residual was
+    # bounded at 0.2 W (docs/decisions.md: "residual within 0.1 W on walks and runs").
+    residual_every: int = 2
     total_mass: float = 70.0  # kg
     gains: dict[str, PDGain] = field(default_factory=default_gains)
     limits_deg: dict[str, tuple[Range, Range, Range]] = field(default_factory=default_limits)

@@ -16,6 +16,10 @@ are in docs/decisions.md:
   whole frame instead (``to_floor``) bent the reference's centre of mass into a path that needs the floor
   to pull, which the tracker followed with a launch (docs/decisions.md: "toe-off flattened before
   flight").
+- :func:`ballistic_flight` moves the root in each flight phase so that the humanoid's centre of mass flies
+  the path gravity allows between take-off and landing: retargeted onto our humanoid's masses, a captured
+  flight is not free fall, and the feed-forward asked the root residual for the difference
+  (docs/decisions.md: "residual within 0.1 W on walks and runs").
 - Support by speed (``stance_by_speed``): a generated swing foot that dips under the floor makes
   grounding raise the frame, and the slow stance foot then hangs centimetres up; such a swing foot is
   lifted above the stance foot and the frame lowered onto it (docs/decisions.md: "support found by
@@ -59,6 +63,10 @@ class ShapingConfig:
     toe_off_lead: float = 0.2  # s
     flight_load: float = 0.3  # fraction of W
     toe_off_depth: float = 0.005  # m
+    # ballistic_flight: in each flight phase of the shaped reference (no geom within ``support`` of the
+    # floor, shorter than ``float_window``), move the root so that the humanoid's centre of mass flies
+    # the path gravity allows between take-off and landing.
+    ballistic_flight: bool = True
 
 
 def shape_reference(model, qpos: np.ndarray, dt: float, config: ShapingConfig | None = None) -> np.ndarray:
@@ -72,6 +80,40 @@ def shape_reference(model, qpos: np.ndarray, dt: float, config: ShapingConfig | 
     geo.feet += shift[:, None]
     if cfg.clearance > 0.0:
         _lift_swing_feet(model, out, geo, dt, cfg)
+    if cfg.ballistic_flight:
+        out = ballistic_flight(model, out, dt, cfg.support, cfg.float_window)
+    return out
+
+
+def ballistic_flight(model, qpos: np.ndarray, dt: float, support: float, longest: float) -> np.ndarray:
+    """qpos (N, 70) at step ``dt`` with the root moved in each flight phase so that the centre of mass
+    follows a ballistic path (a new array).
+
+    A flight phase is a run of frames with no geom within ``support`` of the floor, between a last
+    frame on the floor (take-off) and a first one back (landing), at most ``longest`` seconds apart.
+    In it the centre of mass is put on the one path gravity allows between those two frames: linear
+    horizontally, a parabola of -g vertically. The retargeted humanoid's mass is spread unlike the
+    captured person's, so its centre of mass, as retargeted, does not fly free; the tracker's
+    feed-forward then asked the root residual for the difference (0.1-0.2 W through a run's flights).
+    Frames the move puts into the floor are raised back out of it.
+    """
+    out = qpos.copy()
+    low = _lowest(model, qpos)
+    air = low > support
+    edges = np.flatnonzero(np.diff(np.r_[0, air.astype(np.int8), 0]))
+    spans = [(s - 1, e) for s, e in zip(edges[::2], edges[1::2]) if s > 0 and e < len(qpos)]
+    spans = [(a, b) for a, b in spans if (b - a) * dt <= longest]
+    if not spans:
+        return out
+    com = _com_positions(model, qpos)
+    for a, b in spans:
+        t = np.arange(a + 1, b)
+        s = ((t - a) / (b - a))[:, None]
+        path = (1 - s) * com[a] + s * com[b]
+        path[:, 2] += 0.5 * STANDARD_GRAVITY * ((t - a) * dt) * ((b - t) * dt)
+        out[t, :3] += path - com[t]
+    moved = np.concatenate([np.arange(a + 1, b) for a, b in spans])
+    out[moved, 2] -= np.minimum(_lowest(model, out[moved]), 0.0)
     return out
 
 
@@ -166,15 +208,20 @@ def flight_frames(model, qpos: np.ndarray, dt: float, load: float) -> np.ndarray
 
 def _com_heights(model, qpos: np.ndarray) -> np.ndarray:
     """(N,) height (MuJoCo z) of the whole body's centre of mass in each frame of qpos (N, 70)."""
+    return _com_positions(model, qpos)[:, 2]
+
+
+def _com_positions(model, qpos: np.ndarray) -> np.ndarray:
+    """(N, 3) whole-body centre of mass (MuJoCo world frame) in each frame of qpos (N, 70)."""
     import mujoco
 
     data = mujoco.MjData(model)
     mass = model.body_mass[1:]
-    out = np.empty(len(qpos))
+    out = np.empty((len(qpos), 3))
     for k in range(len(qpos)):
         data.qpos[:] = qpos[k]
         mujoco.mj_kinematics(model, data)
-        out[k] = mass @ data.xipos[1:, 2] / mass.sum()
+        out[k] = mass @ data.xipos[1:] / mass.sum()
     return out
 
 

@@ -42,9 +42,10 @@ STANDARD_GRAVITY = 9.81  # m/s^2: residual bounds are fractions of body weight o
 class TrackingConfig:
     """Gains and bounds of the model-based tracker (SI units; fractions of body weight W = m g)."""
 
-    # Root residual bounds (docs/decisions.md: "tracker residual bounds"): 0.3 W tracks 98 % of the
-    # captured walks/runs with room; upward force capped at 0.1 W so the residual cannot hold a body up.
-    residual_force: float = 0.3  # max |F| on the root as a fraction of W
+    # Root residual bounds (docs/decisions.md: "tracker residual bounds", "residual within 0.1 W on walks
+    # and runs"): 0.2 W with the feet carrying the force first; upward force capped at 0.1 W so the
+    # residual cannot hold a body up.
+    residual_force: float = 0.2  # max |F| on the root as a fraction of W
     residual_torque: float = 1.0  # max |tau| on the root as a fraction of W x 1 m
     residual_lift: float = 0.1  # max upward force on the root as a fraction of W (below 1: cannot float)
     root_kp: float = 10000.0  # N/m, pelvis position PD (before clipping)
@@ -58,6 +59,10 @@ class TrackingConfig:
     # simulation first: foot forces in the friction pyramid (NNLS), made by the legs' joint torques; only
     # what the feet cannot carry is left to the residual (docs/decisions.md: "balance through the feet").
     feet_balance: bool = True
+    # Weight of the torque rows against the force rows in that fit (at 1, 1 N m counts as much as 1 N):
+    # below 1 the feet carry more of the force and leave more torque to the residual, whose bound
+    # (``residual_torque``) is the looser one.
+    feet_torque_weight: float = 0.3
 
 
 @dataclass
@@ -322,9 +327,10 @@ class ModelBasedTracker:
         for i, c in enumerate(use):
             mujoco.mj_jac(self.model, data, jac[i], None, data.contact.pos[c], int(bodies[c]))
         gen = np.einsum("pcv,ec->pev", jac, self._pyr).reshape(-1, self.model.nv)
-        a = gen[:, :6].T
+        rows = np.array([1.0, 1.0, 1.0] + [self.config.feet_torque_weight] * 3)
+        a = gen[:, :6].T * rows[:, None]
         m = a.shape[1]
-        coef, _ = nnls(np.vstack([a, 1e-3 * np.eye(m)]), np.concatenate([wrench, np.zeros(m)]))
+        coef, _ = nnls(np.vstack([a, 1e-3 * np.eye(m)]), np.concatenate([wrench * rows, np.zeros(m)]))
         total = coef @ gen
         return np.clip(-total[6:], -self._limits, self._limits), total[:6]
 

@@ -206,3 +206,36 @@ def test_a_walk_has_no_toe_off_to_flatten(walk_qpos) -> None:
     model, qpos = walk_qpos
     assert not flight_frames(model, qpos, DT, ShapingConfig().flight_load).any()
     np.testing.assert_array_equal(flatten_toe_off(model, qpos, DT), qpos)
+
+
+def test_flight_phases_fly_ballistically(mocap_dir) -> None:
+    """A Bandai sprint, grounded: in every flight phase the root moves so that the humanoid's centre of
+    mass accelerates at -g and not at all horizontally (where no frame had to be raised back out of the
+    floor); frames on the floor and every hinge are left as they were."""
+    from physmotion.io.importer import import_clip, load_manifest
+    from physmotion.physics.shaping import _com_positions, ballistic_flight
+    from physmotion.physics.tracking import STANDARD_GRAVITY
+
+    info = {c.clip: c for c in load_manifest(mocap_dir)}["bandai1_dataset-1_dash_proud_001"]
+    run = import_clip(info).joints.astype(np.float64)
+    body = body_from_joints(run)
+    model = build_model(body)
+    qpos = to_floor(model, resample_qpos(joints_to_qpos(run, model, lift=foot_lift(body)), 20.0, 1.0 / DT),
+                    DT, 1.0)
+    support = ShapingConfig().support
+    out = ballistic_flight(model, qpos, DT, support, 1.0)
+    air = _lowest(model, qpos) > support
+    changed = np.abs(out - qpos).max(axis=1) > 0
+    assert 0.05 < air.mean() < 0.6 and changed.any()
+    assert not changed[~air].any() and np.array_equal(out[:, 3:], qpos[:, 3:])
+    assert _lowest(model, out).min() > -1e-9
+    com = _com_positions(model, out)
+    acc = (com[2:] - 2 * com[1:-1] + com[:-2]) / DT**2  # at frames 1..N-2
+    # Inside each flight phase (take-off and landing frames are on the path as they were).
+    edges = np.flatnonzero(np.diff(np.r_[0, air.astype(np.int8), 0]))
+    inside = [t for s, e in zip(edges[::2], edges[1::2]) if s > 0 and e < len(qpos) for t in range(s, e)]
+    raised = np.flatnonzero(air & np.isclose(_lowest(model, out), 0.0, atol=1e-9))  # back out of the floor
+    rows = np.array([t for t in inside if not np.isin([t - 1, t, t + 1], raised).any()])
+    print(f"\n{len(inside)} flight frames, {len(raised)} raised back out of the floor")
+    assert len(rows) >= 5
+    np.testing.assert_allclose(acc[rows - 1], np.tile([0.0, 0.0, -STANDARD_GRAVITY], (len(rows), 1)), atol=1e-6)
