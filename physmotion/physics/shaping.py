@@ -65,8 +65,10 @@ class ShapingConfig:
     toe_off_depth: float = 0.005  # m
     # ballistic_flight: in each flight phase of the shaped reference (no geom within ``support`` of the
     # floor, shorter than ``float_window``), move the root so that the humanoid's centre of mass flies
-    # the path gravity allows between take-off and landing.
+    # the path gravity allows between take-off and landing, unless that moves it by more than
+    # ``ballistic_max`` (a hover, a step onto something: not a flight the tracker can make ballistic).
     ballistic_flight: bool = True
+    ballistic_max: float = 0.05  # m
 
 
 def shape_reference(model, qpos: np.ndarray, dt: float, config: ShapingConfig | None = None) -> np.ndarray:
@@ -81,11 +83,13 @@ def shape_reference(model, qpos: np.ndarray, dt: float, config: ShapingConfig | 
     if cfg.clearance > 0.0:
         _lift_swing_feet(model, out, geo, dt, cfg)
     if cfg.ballistic_flight:
-        out = ballistic_flight(model, out, dt, cfg.support, cfg.float_window)
+        out = ballistic_flight(model, out, dt, cfg.support, cfg.float_window, cfg.ballistic_max)
     return out
 
 
-def ballistic_flight(model, qpos: np.ndarray, dt: float, support: float, longest: float) -> np.ndarray:
+def ballistic_flight(
+    model, qpos: np.ndarray, dt: float, support: float, longest: float, max_shift: float = np.inf
+) -> np.ndarray:
     """qpos (N, 70) at step ``dt`` with the root moved in each flight phase so that the centre of mass
     follows a ballistic path (a new array).
 
@@ -95,7 +99,9 @@ def ballistic_flight(model, qpos: np.ndarray, dt: float, support: float, longest
     horizontally, a parabola of -g vertically. The retargeted humanoid's mass is spread unlike the
     captured person's, so its centre of mass, as retargeted, does not fly free; the tracker's
     feed-forward then asked the root residual for the difference (0.1-0.2 W through a run's flights).
-    Frames the move puts into the floor are raised back out of it.
+    A phase whose root would move by more than ``max_shift`` metres is left as it is: captured runs and
+    jumps move by up to 4 and 5 cm, while a generated jump that hovers for half a second would be flung
+    a metre up. Frames the move puts into the floor are raised back out of it.
     """
     out = qpos.copy()
     low = _lowest(model, qpos)
@@ -106,14 +112,19 @@ def ballistic_flight(model, qpos: np.ndarray, dt: float, support: float, longest
     if not spans:
         return out
     com = _com_positions(model, qpos)
+    moved = []
     for a, b in spans:
         t = np.arange(a + 1, b)
         s = ((t - a) / (b - a))[:, None]
         path = (1 - s) * com[a] + s * com[b]
         path[:, 2] += 0.5 * STANDARD_GRAVITY * ((t - a) * dt) * ((b - t) * dt)
-        out[t, :3] += path - com[t]
-    moved = np.concatenate([np.arange(a + 1, b) for a, b in spans])
-    out[moved, 2] -= np.minimum(_lowest(model, out[moved]), 0.0)
+        shift = path - com[t]
+        if np.linalg.norm(shift, axis=1).max() <= max_shift:
+            out[t, :3] += shift
+            moved.append(t)
+    if moved:
+        rows = np.concatenate(moved)
+        out[rows, 2] -= np.minimum(_lowest(model, out[rows]), 0.0)
     return out
 
 

@@ -238,4 +238,23 @@ def test_flight_phases_fly_ballistically(mocap_dir) -> None:
     rows = np.array([t for t in inside if not np.isin([t - 1, t, t + 1], raised).any()])
     print(f"\n{len(inside)} flight frames, {len(raised)} raised back out of the floor")
     assert len(rows) >= 5
-    np.testing.assert_allclose(acc[rows - 1], np.tile([0.0, 0.0, -STANDARD_GRAVITY], (len(rows), 1)), atol=1e-6)
+    free_fall = np.tile([0.0, 0.0, -STANDARD_GRAVITY], (len(rows), 1))
+    np.testing.assert_allclose(acc[rows - 1], free_fall, atol=1e-6)
+
+
+def test_a_hover_is_not_made_ballistic(walk_qpos) -> None:
+    """Half a second 10 cm up in the middle of a stand: gravity would take a flight that long 20-30 cm
+    high, so the phase moves by more than ``ballistic_max`` and is left as it is; without the bound it is
+    moved."""
+    from physmotion.physics.shaping import ballistic_flight
+
+    model, qpos = walk_qpos
+    stand = np.repeat(to_floor(model, qpos[:1], DT, 0.0), 60, axis=0)
+    t = np.arange(60) * DT
+    flight = (t > 0.8) & (t < 1.3)
+    stand[flight, 2] += 0.1 * np.sin(np.pi * (t[flight] - 0.8) / 0.5)
+    cfg = ShapingConfig()
+    kept = ballistic_flight(model, stand, DT, cfg.support, 1.0, cfg.ballistic_max)
+    np.testing.assert_array_equal(kept, stand)
+    flung = ballistic_flight(model, stand, DT, cfg.support, 1.0)
+    assert (flung[:, 2] - stand[:, 2]).max() > 0.15
