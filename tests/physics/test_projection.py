@@ -40,8 +40,7 @@ def test_walking_and_running_clips_meet_the_targets(mocap_dir) -> None:
     """The issue's all-clips targets on every 8th walking/running clip (26 of 203; the whole set is
     bench/projection_quality.py). Input measured grounded on the humanoid's surface (the metrics' floor
     convention). Skate: the simulated feet slide more than the captured ones (a shortfall): on these 26
-    3.9 -> 6.1 mm (1.54x; 1.34x with the residual of 2026-11-25, while over all 203 clips the present
-    default slides less than that one, 5.97 against 6.17 mm: results/projection_dynamic.md)."""
+    3.9 -> 6.1 mm (1.54x); all 203 clips are in results/projection_dynamic.md."""
     from physmotion.eval.projection_quality import locomotion_clips, measure_clips
 
     clips = locomotion_clips(mocap_dir)[::8]
@@ -119,8 +118,8 @@ def test_a_dragged_root_skates_less(mocap_dir) -> None:
 def test_follow_drift_moves_the_motion_to_a_body_that_drifted(walk: np.ndarray) -> None:
     """A walk whose root travels 2.5 times as far as its steps carry it (its feet slide, as generated
     motions' do): the body falls behind. Reset onto the motion, it jumps; followed, it walks on. In the
-    sampling preset, the one that resets: with the plain projection's residual of 2026-11-26 (0.2 W) the
-    followed body fell behind by more than its pose allowed and was reset once too."""
+    sampling preset, the one that resets: with the plain projection's 0.2 W residual the followed body
+    fell behind by more than its pose allowed and was reset once too."""
     root = walk[:, 0, :] - walk[0, 0, :]
     sliding = walk + 1.5 * root[:, None, :] * np.array([1.0, 0.0, 1.0])
     reset = project(sliding, config=ProjectionConfig.sampling(tau=0.3, follow_drift=False))
@@ -211,8 +210,8 @@ def _flight_apex(joints: np.ndarray, surface, simulated: np.ndarray, fps: float)
 def test_captured_jumps_keep_their_flight(mocap_dir) -> None:
     """The three single jumps of the mocap (CMU 02_04 as BVH and as iClone; 01_01's forward jumps): the
     airborne share holds, and the pelvis reaches the apex of the longest flight 6.6 cm short on average
-    (6.9, 7.0, 5.7; with the residual of 2026-11-25, 0.3 W: 4.4, 3.9, 6.2; the tracker as it was: 12.7,
-    11.4, 10.9). The issue asks for 3 cm: a shortfall."""
+    (6.9, 7.0, 5.7; the tracker as it was: 12.7, 11.4, 10.9; other residual settings: docs/decisions.md
+    "residual within 0.1 W on walks and runs"). The issue asks for 3 cm: a shortfall."""
     from physmotion.eval.projection_quality import measure_projection
     from physmotion.physics.surface import ground_on_surface
 

@@ -59,7 +59,7 @@ def test_tracker_holds_a_real_standing_pose(real_walk: np.ndarray) -> None:
 
 def test_residual_held_over_two_steps_stands_over_four_rocks(real_walk: np.ndarray) -> None:
     """The default holds the residual over 2 simulation steps (180 Hz) and stands as still as every-step
-    updates. Held over 4 (90 Hz, the default before 2026-11-26, still the sampling preset's) it rocks a
+    updates. Held over 4 (90 Hz, the sampling preset's) with the tracker of that measurement it rocks a
     standing body: MPJPE peaks near 34 mm after 2 s and then settles, where every-step updates hold 4 mm
     (docs/decisions.md: "held root residual"), guarded at that level."""
     model, ref = _standing_reference(real_walk, seconds=3.0)
