@@ -5,7 +5,7 @@ Usage: python scripts/projection_dynamic.py [--mocap ../shared/data/mocap] [--ou
        [--limit N]
 Rows: "tracker v0.1" (the model-based tracker as it was: no toe-off flattening, the root residual carries
 the whole root wrench, bounded at 0.3 W and held over 4 simulation steps), "+ toe-off", "+ feet balance",
-"toe-off + feet balance" (both: the default of 2026-11-25), "+ ballistic flight" (that, with flight phases
+"toe-off + feet balance" (both, with the residual above), "+ ballistic flight" (that, with flight phases
 made ballistic), and "default" (``ProjectionConfig()``: all of it, the residual bounded at 0.2 W and held
 over 2 steps, the feet's fit weighting torque 0.3).
 Categories from the captions (physmotion.eval.projection_quality.category). Input metrics are measured on
@@ -31,7 +31,7 @@ from physmotion.physics.tracking import TrackingConfig
 
 def configs() -> dict[str, ProjectionConfig]:
     base = ProjectionConfig()
-    # The residual as it was before 2026-11-26: 0.3 W, held over 4 steps, torque weighted as force.
+    # The residual before docs/decisions.md "residual within 0.1 W on walks and runs": a baseline row.
     held = replace(base, humanoid=replace(base.humanoid, residual_every=4),
                    tracking=replace(base.tracking, residual_force=0.3, feet_torque_weight=1.0))
     no_feet = replace(held.tracking, feet_balance=False)
