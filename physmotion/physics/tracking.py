@@ -257,6 +257,7 @@ class ModelBasedTracker:
         self._is_foot = np.zeros(model.nbody, dtype=bool)
         self._is_foot[feet] = True
         self._pyr = _pyramid(self.config.friction)
+        self._fit_rows = np.array([1.0, 1.0, 1.0] + [self.config.feet_torque_weight] * 3)  # force, torque
 
     def act(self, data, ref: Reference, k: int) -> tuple[np.ndarray, np.ndarray]:
         """Actuator targets for the control step k -> k+1 (ctrl (nu,); qfrc (nv,) is zero here).
@@ -327,7 +328,7 @@ class ModelBasedTracker:
         for i, c in enumerate(use):
             mujoco.mj_jac(self.model, data, jac[i], None, data.contact.pos[c], int(bodies[c]))
         gen = np.einsum("pcv,ec->pev", jac, self._pyr).reshape(-1, self.model.nv)
-        rows = np.array([1.0, 1.0, 1.0] + [self.config.feet_torque_weight] * 3)
+        rows = self._fit_rows
         a = gen[:, :6].T * rows[:, None]
         m = a.shape[1]
         coef, _ = nnls(np.vstack([a, 1e-3 * np.eye(m)]), np.concatenate([wrench * rows, np.zeros(m)]))
