@@ -5,9 +5,10 @@ Usage: python bench/physics.py [--batch 64] [--seconds 6]
 - projection: sim steps per second inside project() (retarget, reference shaping, inverse dynamics,
   closed-loop tracking at the simulation rate, resampling), and its ratio to raw;
 - latency of one motion (warm: best of three after a first call), also with the root residual
-  recomputed at every simulation step instead of every ``residual_every``-th, and throughput of a batch with
-  1 worker process and with one per core (mujoco.rollout cannot run this closed-loop controller; see
-  physics/sim.py).
+  recomputed at every simulation step instead of every ``residual_every``-th, and with iterative
+  learning control (``project --ilc 2``: three simulations, the option for offline projection);
+  throughput of a batch with 1 worker process and with one per core (mujoco.rollout cannot run this
+  closed-loop controller; see physics/sim.py).
 """
 
 from __future__ import annotations
@@ -71,6 +72,7 @@ def main() -> None:
     latency = _best_latency(joints, cfg)
     every_step = replace(cfg, humanoid=replace(cfg.humanoid, residual_every=1))
     latency_every_step = _best_latency(joints, every_step)
+    latency_ilc = _best_latency(joints, replace(cfg, ilc_passes=2))
     batch = np.stack([joints] * args.batch)
     timings = {}
     for workers in (1, os.cpu_count() or 1):
@@ -89,6 +91,8 @@ def main() -> None:
     table.add_row("latency, 1 motion, warm (s)", f"{latency:.2f}", f"tracked: {bool(one.success)}")
     table.add_row("  the same, root residual at every sim step (s)", f"{latency_every_step:.2f}",
                   f"{latency_every_step / latency:.2f}x the default's time")
+    table.add_row("  the same, with ILC (--ilc 2) (s)", f"{latency_ilc:.2f}",
+                  f"{latency_ilc / latency:.2f}x the default's time")
     for workers, secs in timings.items():
         table.add_row(f"batch {args.batch}, {workers} process(es): motions/s", f"{args.batch / secs:.2f}",
                       f"{args.batch * sim_steps / secs / raw:.2f}")

@@ -135,6 +135,15 @@ def test_project_writes_the_simulated_motion(mocap_dir: Path, tmp_path: Path) ->
     assert shown["residual_force"] == pytest.approx(float(projected.residual[:, 0].mean()), rel=1e-5)
     assert shown["residual_force_p95"] >= shown["residual_force"]
     assert "residual_force" not in json.loads(run("metrics", npz, "--json").stdout)["files"][0]["metrics"]
+    # Iterative learning control keeps the pass closest to the input: never further than the plain one.
+    plain_mm = int(re.search(r"MPJPE mean (\d+) mm", run("project", npz, "-o", out, "--overwrite").stdout)[1])
+    res = run("project", npz, "-o", tmp_path / "ilc.npz", "--ilc", "2")
+    assert res.returncode == 0, res.stderr
+    assert int(re.search(r"MPJPE mean (\d+) mm", res.stdout)[1]) <= plain_mm
+    assert Motion.load(tmp_path / "ilc.npz").joints.shape == (60, 22, 3)
+    res = run("project", npz, "-o", tmp_path / "bad.npz", "--ilc", "-1")
+    assert res.returncode == 1 and res.stderr.startswith("error: ilc_passes") and res.stderr.count("\n") == 1
+    assert not (tmp_path / "bad.npz").exists()
     res = run("project", tmp_path / "missing.npz", "-o", tmp_path / "x.npz")
     assert res.returncode == 1 and res.stderr.startswith("error: ") and not (tmp_path / "x.npz").exists()
 

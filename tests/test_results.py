@@ -103,6 +103,7 @@ def dynamic_quotes() -> list[str]:
     configs = _load("projection_dynamic.json")["configs"]
     now, before = configs["default"], configs["tracker v0.1"]
     loco, run, jump = now["walks+runs"], now["run"], now["jump"]
+    ilc = configs["default + ILC"]["run"]
     return [
         f"{100 * loco['success']:.1f} % tracked at {loco['mpjpe_mm']:.1f} mm",
         f"(tracker v0.1: {100 * before['walks+runs']['success']:.1f} % at {before['walks+runs']['mpjpe_mm']:.1f} mm)",
@@ -113,6 +114,8 @@ def dynamic_quotes() -> list[str]:
         f"Skate {run['skate_in']:.1f} -> {run['skate_out']:.1f} mm",
         f"MPJPE {run['mpjpe_mm']:.1f} mm",
         f"jumps: Float {jump['float_in']:.1f} -> {jump['float_out']:.1f} mm",
+        f"ILC: runs MPJPE {ilc['mpjpe_mm']:.1f} mm, Float {ilc['float_out']:.1f} mm, "
+        f"Skate {ilc['skate_out']:.1f} mm",
     ]
 
 

@@ -248,8 +248,8 @@ def test_a_non_grounded_motion_is_rejected_not_tracked_into_the_floor(mocap_dir)
 
 
 def test_a_run_is_deterministic_and_batch_equals_one_by_one(mocap_dir, walk: np.ndarray) -> None:
-    """The feet-balance fit and the toe-off flattening are deterministic too; a batch mixing a run and a
-    walk gives what each gives alone."""
+    """The feet-balance fit, the toe-off flattening and iterative learning control are deterministic too;
+    a batch mixing a run and a walk gives what each gives alone."""
     run, fps = _clip(mocap_dir, "bandai2_dataset-2_run_feminine_001")
     assert fps == 20.0
     run = run[:60]
@@ -258,5 +258,43 @@ def test_a_run_is_deterministic_and_batch_equals_one_by_one(mocap_dir, walk: np.
     again = project(run)
     np.testing.assert_array_equal(alone.simulated, again.simulated)
     np.testing.assert_array_equal(batch.simulated[0], alone.simulated)
+    ilc = ProjectionConfig(ilc_passes=1)  # iterative learning control as well
+    np.testing.assert_array_equal(project(run, config=ilc).simulated, project(run, config=ilc).simulated)
     np.testing.assert_array_equal(batch.residual[0], alone.residual)
     np.testing.assert_array_equal(batch.simulated[1], project(walk[:60]).simulated)
+
+
+@pytest.mark.slow
+def test_ilc_brings_runs_closer_to_the_input(mocap_dir) -> None:
+    """Iterative learning control (``ilc_passes=2``) on every 6th captured run: the root's error fed
+    forward brings the runners closer to the input and out of the air they added, and the kept pass is
+    never worse than the first simulation. Measured on these 9 runs: MPJPE 47.4 -> 33.1 mm, Float 20.5 ->
+    15.5 mm (input 12.8), a later pass kept on 7; over all 53 runs (results/projection_dynamic.md) Float
+    15.0 -> 12.5 mm meets the issue's input + 2 mm, and MPJPE goes 50.2 -> 42.6 mm."""
+    from dataclasses import replace
+
+    from physmotion.eval.projection_quality import category, measure_clips, summarize
+    from physmotion.io.importer import load_manifest
+
+    runs = [c for c in load_manifest(mocap_dir) if category(c.captions) == "run"][::6]
+    plain_each = measure_clips(runs)
+    ilc_each = measure_clips(runs, replace(ProjectionConfig(), ilc_passes=2))
+    plain, ilc = summarize(plain_each), summarize(ilc_each)
+    print(f"\n{len(runs)} runs: MPJPE {plain['mpjpe_mm']:.1f} -> {ilc['mpjpe_mm']:.1f} mm, Float "
+          f"{plain['float_out']:.1f} -> {ilc['float_out']:.1f} mm (input {plain['float_in']:.1f}), Skate "
+          f"{plain['skate_out']:.1f} -> {ilc['skate_out']:.1f} mm, passes kept "
+          f"{[int(m.result.ilc_pass) for m in ilc_each]}")
+    assert ilc["success"] == 1.0
+    for p, i in zip(plain_each, ilc_each):  # the first pass is the plain projection: kept unless beaten
+        assert i.result.mpjpe.mean() <= p.result.mpjpe.mean() + 1e-9
+        assert (int(i.result.ilc_pass) == 0) == np.array_equal(i.result.simulated, p.result.simulated)
+    assert ilc["mpjpe_mm"] <= 0.85 * plain["mpjpe_mm"]
+    assert ilc["float_out"] < plain["float_out"] - 1.0
+    assert sum(int(m.result.ilc_pass) > 0 for m in ilc_each) >= len(runs) // 2
+
+
+def test_ilc_settings_are_checked() -> None:
+    with pytest.raises(ShapeError, match="ilc_passes"):
+        ProjectionConfig(ilc_passes=-1)
+    with pytest.raises(ShapeError, match="ilc_gain"):
+        ProjectionConfig(ilc_gain=0.0)
