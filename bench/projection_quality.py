@@ -1,6 +1,6 @@
 """Physics projection on every captured clip of the bundled mocap, by category of motion: one table.
 
-Usage: python bench/projection_quality.py [--mocap ../shared/data/mocap] [--limit N] [--walks-runs]
+Usage: python bench/projection_quality.py [--mocap ../shared/data/mocap] [--limit N] [--walks-runs] [--ilc N]
 One row per category (jump, kick, dance, run, turn, walk, other; from the captions), then "walks+runs"
 (the 203 walking/running clips of earlier figures) and "all": success (no MPJPE past 0.5 m), MPJPE, the
 physical metrics of input -> simulation (both on the clip's humanoid geometry, the input grounded on it:
@@ -27,18 +27,20 @@ def main() -> None:
     parser.add_argument("--mocap", default="../shared/data/mocap")
     parser.add_argument("--limit", type=int, default=0, help="only the first N clips")
     parser.add_argument("--walks-runs", action="store_true", help="only the walking/running clips")
+    parser.add_argument("--ilc", type=int, default=0, help="iterative learning control passes (project --ilc)")
     args = parser.parse_args()
     clips = load_manifest(args.mocap)
     if args.walks_runs:
         clips = [c for c in clips if LOCOMOTION.search(c.captions[0].lower())]
     clips = clips[: args.limit] if args.limit else clips
     start = time.perf_counter()
-    measured = measure_clips(clips, ProjectionConfig())  # one worker process per core
+    measured = measure_clips(clips, ProjectionConfig(ilc_passes=args.ilc))  # one worker process per core
     seconds = time.perf_counter() - start
     rows = by_category(clips, measured)
     failed = [c.clip for c, m in zip(clips, measured) if not m.result.success]
 
-    table = Table(title=f"projection of {len(clips)} captured clips by category ({seconds:.0f} s)",
+    ilc = f", ILC {args.ilc} passes" if args.ilc else ""
+    table = Table(title=f"projection of {len(clips)} captured clips by category{ilc} ({seconds:.0f} s)",
                   caption=f"failed: {', '.join(failed) or '-'}")  # fmt: skip
     for col in ("category", "clips", "success", "MPJPE mm", "Penetrate", "Float", "Skate", "Phys-Err",
                 "airborne", "residual F (W)", "residual τ (W m)"):  # fmt: skip
