@@ -75,6 +75,8 @@ class ProjectionConfig:
             raise ShapeError(f"ilc_passes must be an integer in 0..20, got {self.ilc_passes}")
         if not 0.0 < self.ilc_gain <= 1.0:
             raise ShapeError(f"ilc_gain must be in (0, 1], got {self.ilc_gain}")
+        if self.ilc_passes and self.reset_on_fail:  # a reset or a moved reference is no error to learn from
+            raise ShapeError("ilc_passes needs the plain projection (reset_on_fail off)")
 
     @classmethod
     def sampling(cls, **overrides) -> ProjectionConfig:
