@@ -613,6 +613,10 @@ FLOOR_HELP = (f"Floor of the training motions and so of the model's samples: '{F
               f"(default: {FLOOR_SURFACE}).")
 
 
+ILC_HELP = ("Refine with P under iterative learning control, this many passes more per motion (as "
+            "'physmotion project --ilc'; each costs one more simulation) (default: 0).")
+
+
 @morph_app.command("synth")
 def morph_synth_cmd(
     data: Path = typer.Option(..., help="HumanML3D-layout folder whose train captions are generated."),
@@ -622,11 +626,12 @@ def morph_synth_cmd(
     per_caption: int | None = typer.Option(None, "--per-caption", help="Samples per train caption (default: 1)."),
     seed: int | None = typer.Option(None, help="Random seed of noise and lengths (default: 0)."),
     workers: int | None = typer.Option(None, help="Physics worker processes (0: one per core) (default: 0)."),
+    ilc: int | None = typer.Option(None, "--ilc", help=ILC_HELP),
 ) -> None:
     """Generate motions for every train caption and refine each with the physics projection P (Morph)."""
     from physmotion.morph.synth import SynthConfig, synthesize
 
-    cfg = _with(SynthConfig(), per_caption=per_caption, seed=seed, workers=workers)
+    cfg = _with(SynthConfig(), per_caption=per_caption, seed=seed, workers=workers, ilc_passes=ilc)
     report = synthesize(model, data, out, cfg, progress=sys.stderr.isatty())
     console.print(f"{out}: {report.done} new item(s), {report.total_done}/{report.planned} done in "
                   f"{report.seconds:.0f} s (sampling {report.sampling_seconds:.0f} s, physics "
@@ -692,6 +697,7 @@ def morph_run_cmd(
     lr: float | None = typer.Option(None, help="Fine-tuning learning rate (default: 1e-05)."),
     seed: int | None = typer.Option(None, help="Random seed of synthesis and fine-tuning (default: 0)."),
     floor: str | None = typer.Option(None, help=FLOOR_HELP),
+    ilc: int | None = typer.Option(None, "--ilc", help=ILC_HELP),
 ) -> None:
     """Morph's multi-round loop: per round, synthesise and refine, select, fine-tune from the last round."""
     from physmotion.morph.finetune import FinetuneConfig
@@ -701,7 +707,7 @@ def morph_run_cmd(
 
     check_output(out, "folder", overwrite=True)
     check_run_dir(out, model)
-    synth_cfg = _with(SynthConfig(), per_caption=per_caption, seed=seed)
+    synth_cfg = _with(SynthConfig(), per_caption=per_caption, seed=seed, ilc_passes=ilc)
     ft_cfg = _with(FinetuneConfig(model="", synth="", data=str(data), out=""), steps=steps, mix=mix, lr=lr, seed=seed,
                    floor=floor)  # fmt: skip
     rows = run_rounds(model, data, out, rounds, synth_cfg, ft_cfg, progress=sys.stderr.isatty())

@@ -125,6 +125,11 @@ def test_other_settings_are_refused(model, built_dir: Path, full: Path, tmp_path
     with pytest.raises(PhysmotionError, match="other settings"):
         synthesize(None, built_dir, out, SynthConfig(sampler=SamplerConfig(steps=5), batch_size=2, max_frames=40,
                                                      seed=1), captions=CAPTIONS, model=model)  # fmt: skip
+    # P with iterative learning control refines otherwise: a folder made with plain P is not continued.
+    with pytest.raises(PhysmotionError, match="other settings .projection"):
+        synthesize(None, built_dir, out, SynthConfig(sampler=SamplerConfig(steps=5), batch_size=2, max_frames=40,
+                                                     ilc_passes=2), captions=CAPTIONS, model=model)  # fmt: skip
+    assert SynthConfig(ilc_passes=2).projection().ilc_passes == 2
 
 
 def test_tilt_correction() -> None:
