@@ -213,10 +213,10 @@ def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig) -> dict[st
     qpos = resample_qpos(joints_to_qpos(x, model, lift=lift, config=config.humanoid), fps, ctrl_fps)
     grounded = _grounded(model, qpos, ctrl_fps, config)
     target = shape_reference(model, qpos, config.humanoid.control_dt, config.shaping)
+    tracker = ModelBasedTracker(model, config.tracking)  # holds no episode state: one serves every pass
     reference, best = target, None
     for ilc_pass in range(config.ilc_passes + 1):
         ref = prepare_reference(model, reference, config.humanoid.control_dt, config.tracking)
-        tracker = ModelBasedTracker(model, config.tracking)
         roll = simulate(model, ref, tracker, config.humanoid, fail_mpjpe=config.tau,
                         reset_on_fail=config.reset_on_fail, follow_drift=config.follow_drift)
         out = _back_to_input_rate(roll, model, lift, x, fps, ctrl_fps, config.tau, config.reset_on_fail,
