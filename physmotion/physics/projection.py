@@ -52,6 +52,10 @@ class ProjectionConfig:
     # With reset_on_fail: where the body has only drifted from the reference (its pose, horizontal offset
     # taken out, is within tau), move the rest of the reference to it instead of resetting it.
     follow_drift: bool = True
+    # With reset_on_fail and follow_drift: where the body is lower than the motion and its pose is within
+    # tau once the whole offset is taken out, it fell short of a flight (a jump's push comes up short):
+    # let it land instead of resetting it into the air (docs/decisions.md: "let a short jump land").
+    let_land: bool = True
     # What the tracker is asked to follow: the reference out of the floor, swing feet a little higher
     # (physics/shaping.py has the measurements).
     shaping: ShapingConfig = field(default_factory=ShapingConfig)
@@ -81,9 +85,10 @@ class ProjectionConfig:
     @classmethod
     def sampling(cls, **overrides) -> ProjectionConfig:
         """The preset generation uses (physdiff and post): a fall (error past tau = 0.15 m) puts the
-        humanoid back on the motion, or moves the motion to it where it only drifted, so P always returns
-        a simulated motion; each reset is counted (``ProjectedMotion.resets``). tau 0.15 m beat 0.2-0.5 m
-        on PhysDiff's Phys-Err (docs/decisions.md: "sampling projection: reset at 0.15 m").
+        humanoid back on the motion, or moves the motion to it where it only drifted or lets it land where
+        it only fell short of a flight, so P always returns a simulated motion; each reset is counted
+        (``ProjectedMotion.resets``). tau 0.15 m beat 0.2-0.5 m on PhysDiff's Phys-Err (docs/decisions.md:
+        "sampling projection: reset at 0.15 m").
 
         The root wrench is not carried by the feet here (``TrackingConfig.feet_balance`` off): on the
         denoiser's intermediate motions it doubled the share of outputs with a reset (docs/decisions.md:
@@ -112,7 +117,8 @@ class ProjectedMotion:
     success: (B,) the episode ran to the end without MPJPE passing the failure threshold.
     resets: (B,) int, how often the humanoid was put back on the reference (``reset_on_fail``): each is a
     jump (teleport) in the simulated motion.
-    With ``follow_drift`` a body that only drifted counts as a success; its ``mpjpe`` to the input grows.
+    With ``follow_drift`` a body that only drifted (or, with ``let_land``, fell short of a flight) counts as
+    a success; its ``mpjpe`` to the input grows.
     selected: (B,) the simulation was kept (MPJPE below ``tau`` throughout, and the motion grounded).
     ilc_pass: (B,) int, which simulation was kept with ``ProjectionConfig.ilc_passes`` (0: the first).
     grounded: (B,) the input never stays off the floor for long (``ProjectionConfig.support_height``,
@@ -218,7 +224,8 @@ def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig) -> dict[st
     for ilc_pass in range(config.ilc_passes + 1):
         ref = prepare_reference(model, reference, config.humanoid.control_dt, config.tracking)
         roll = simulate(model, ref, tracker, config.humanoid, fail_mpjpe=config.tau,
-                        reset_on_fail=config.reset_on_fail, follow_drift=config.follow_drift)
+                        reset_on_fail=config.reset_on_fail, follow_drift=config.follow_drift,
+                        let_land=config.let_land)
         out = _back_to_input_rate(roll, model, lift, x, fps, ctrl_fps, config.tau, config.reset_on_fail,
                                   grounded)
         score = (not bool(out["success"]), float(out["mpjpe"].mean()))

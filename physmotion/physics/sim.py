@@ -33,7 +33,7 @@ class Rollout:
     ``reset_on_fail`` and ``follow_drift``: the first step that needed a reset).
     resets: how many times the humanoid was put back on the reference (``reset_on_fail``).
     shifts: how many times the rest of the reference was moved to where the body had drifted
-    (``follow_drift``).
+    (``follow_drift``) or let land (``let_land``).
     """
 
     qpos: np.ndarray
@@ -84,6 +84,7 @@ def simulate(
     fail_mpjpe: float = 0.5,
     reset_on_fail: bool = False,
     follow_drift: bool = False,
+    let_land: bool = False,
 ) -> Rollout:
     """Run ``controller`` along ``ref`` (at the control rate of ``config``) from the reference's start.
 
@@ -93,7 +94,10 @@ def simulate(
     practice when evaluating imitation policies, e.g. PHC); ``resets`` counts how often. With
     ``follow_drift`` as well, a body whose pose is still within ``fail_mpjpe`` once its horizontal
     offset from the reference is taken out has only drifted (on generated motions whose feet slide, it
-    lags behind): the rest of the reference is moved to it instead, and nothing jumps.
+    lags behind): the rest of the reference is moved to it instead, and nothing jumps. With ``let_land``
+    too, a body *below* the reference whose pose is within ``fail_mpjpe`` once its whole offset is taken
+    out has fallen short of a flight (a jump's push came up short): the horizontal offset is followed as
+    above and the body lands, where a reset would lift it into the air.
     """
     import mujoco
 
@@ -115,6 +119,7 @@ def simulate(
     for k in range(n):
         qpos[k] = data.qpos
         mpjpe[k] = _mpjpe(data, lay, ref.joints_mj[k])
+        landing = False
         if mpjpe[k] > fail_mpjpe and reset_on_fail and follow_drift:
             offset = data.qpos[:2] - ref.qpos[k, :2]  # MuJoCo x/y: horizontal
             moved = ref.joints_mj[k].copy()
@@ -123,17 +128,23 @@ def simulate(
             if pose_error <= fail_mpjpe:  # only drifted: the copy of the reference is made only now
                 ref, mpjpe[k] = ref.shifted(k, offset, cfg.substeps), pose_error
                 shifts += 1
+            elif let_land and data.qpos[2] < ref.qpos[k, 2]:
+                moved[:, 2] += data.qpos[2] - ref.qpos[k, 2]
+                if _mpjpe(data, lay, moved) <= fail_mpjpe:  # only lower: let it land
+                    ref = ref.shifted(k, offset, cfg.substeps)
+                    mpjpe[k] = _mpjpe(data, lay, ref.joints_mj[k])
+                    shifts, landing = shifts + 1, True
         # Contacts with the floor (geom 0) by the foot bodies; the other geom of a floor pair is the body's.
         pairs = data.contact.geom[: data.ncon]
         on_floor = model.geom_bodyid[pairs[(pairs == 0).any(axis=1)].max(axis=1)]
         contacts[k] = (foot_bodies[:, None] == on_floor[None, :]).any(axis=1)  # np.isin: 5x slower here
-        if mpjpe[k] > fail_mpjpe and reset_on_fail:
+        if mpjpe[k] > fail_mpjpe and reset_on_fail and not landing:
             failed_at = k if failed_at is None else failed_at
             resets += 1
             reset_state(model, data, ref, k)
             qpos[k] = data.qpos
             mpjpe[k] = _mpjpe(data, lay, ref.joints_mj[k])
-        elif mpjpe[k] > fail_mpjpe:
+        elif mpjpe[k] > fail_mpjpe and not reset_on_fail:
             failed_at = k
             qpos[k:] = data.qpos
             mpjpe[k:] = mpjpe[k]

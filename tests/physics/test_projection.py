@@ -132,6 +132,24 @@ def test_follow_drift_moves_the_motion_to_a_body_that_drifted(walk: np.ndarray) 
     assert followed.mpjpe.max() > 0.5  # it was moved: far from the input's absolute positions
 
 
+def test_a_body_short_of_a_flight_lands_instead_of_being_reset(walk: np.ndarray) -> None:
+    """The walk lifted by up to 0.3 m for 0.8 s, as a generated jump higher than the humanoid can push
+    off for: the simulated body walks on below the motion, in its pose. Reset (``let_land`` off), it
+    is put back up into the air; let land (the sampling preset's default), it stays on the floor."""
+    t = np.arange(len(walk)) / 20.0
+    lift = np.where((t >= 1.5) & (t <= 2.3), 0.3 * np.sin(np.pi * (t - 1.5) / 0.8), 0.0)
+    hover = walk + lift[:, None, None] * np.array([0.0, 1.0, 0.0])
+    reset = project(hover, config=ProjectionConfig.sampling(let_land=False))
+    landed = project(hover, config=ProjectionConfig.sampling())
+    rise = {name: np.diff(out.simulated[:, 0, 1]).max()
+            for name, out in (("reset", reset), ("landed", landed))}  # fmt: skip
+    print(f"\nresets {reset.resets} -> {landed.resets}; pelvis rise per frame {rise['reset']:.3f} -> "
+          f"{rise['landed']:.3f} m")
+    assert reset.resets >= 1 and rise["reset"] > 0.08  # measured 2 resets, 0.12 m up in one frame
+    assert landed.resets == 0 and landed.success and rise["landed"] < 0.04  # measured 0.02 m
+    assert landed.simulated[:, 0, 1].max() < walk[:, 0, 1].max() + 0.05  # it never left the floor
+
+
 def test_imitation_selection_keeps_the_input_when_tracking_fails(walk: np.ndarray) -> None:
     jumpy = walk[:40].copy()
     jumpy[20:, :, 0] += 3.0  # teleports 3 m sideways: no body can follow
