@@ -119,26 +119,18 @@ def simulate(
     for k in range(n):
         qpos[k] = data.qpos
         mpjpe[k] = _mpjpe(data, lay, ref.joints_mj[k])
-        landing = False
+        offset = None
         if mpjpe[k] > fail_mpjpe and reset_on_fail and follow_drift:
-            offset = data.qpos[:2] - ref.qpos[k, :2]  # MuJoCo x/y: horizontal
-            moved = ref.joints_mj[k].copy()
-            moved[:, :2] += offset
-            pose_error = _mpjpe(data, lay, moved)
-            if pose_error <= fail_mpjpe:  # only drifted: the copy of the reference is made only now
-                ref, mpjpe[k] = ref.shifted(k, offset, cfg.substeps), pose_error
+            offset = _drift(data, lay, ref, k, fail_mpjpe, let_land)
+            if offset is not None:  # the copy of the reference is made only now
+                ref = ref.shifted(k, offset, cfg.substeps)
+                mpjpe[k] = _mpjpe(data, lay, ref.joints_mj[k])
                 shifts += 1
-            elif let_land and data.qpos[2] < ref.qpos[k, 2]:
-                moved[:, 2] += data.qpos[2] - ref.qpos[k, 2]
-                if _mpjpe(data, lay, moved) <= fail_mpjpe:  # only lower: let it land
-                    ref = ref.shifted(k, offset, cfg.substeps)
-                    mpjpe[k] = _mpjpe(data, lay, ref.joints_mj[k])
-                    shifts, landing = shifts + 1, True
         # Contacts with the floor (geom 0) by the foot bodies; the other geom of a floor pair is the body's.
         pairs = data.contact.geom[: data.ncon]
         on_floor = model.geom_bodyid[pairs[(pairs == 0).any(axis=1)].max(axis=1)]
         contacts[k] = (foot_bodies[:, None] == on_floor[None, :]).any(axis=1)  # np.isin: 5x slower here
-        if mpjpe[k] > fail_mpjpe and reset_on_fail and not landing:
+        if mpjpe[k] > fail_mpjpe and reset_on_fail and offset is None:
             failed_at = k if failed_at is None else failed_at
             resets += 1
             reset_state(model, data, ref, k)
@@ -165,6 +157,22 @@ def simulate(
             mujoco.mj_step(model, data, every)
         res_f[k + 1], res_t[k + 1] = force / weight / updates, torque / weight / updates
     return Rollout(qpos, mpjpe, res_f, res_t, contacts, failed_at, resets, shifts)
+
+
+def _drift(data, lay, ref: Reference, k: int, fail_mpjpe: float, let_land: bool) -> np.ndarray | None:
+    """The horizontal offset (2,) of the body from reference step k where it has only drifted: its pose is
+    within ``fail_mpjpe`` once that offset is taken out, or (``let_land``) once its whole offset is, the
+    body being lower (it fell short of a flight and lands below the reference); else None."""
+    offset = data.qpos[:2] - ref.qpos[k, :2]  # MuJoCo x/y: horizontal
+    moved = ref.joints_mj[k].copy()
+    moved[:, :2] += offset
+    if _mpjpe(data, lay, moved) <= fail_mpjpe:
+        return offset
+    if let_land and data.qpos[2] < ref.qpos[k, 2]:
+        moved[:, 2] += data.qpos[2] - ref.qpos[k, 2]
+        if _mpjpe(data, lay, moved) <= fail_mpjpe:
+            return offset
+    return None
 
 
 def _mpjpe(data, lay, target: np.ndarray) -> float:
