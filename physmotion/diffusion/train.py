@@ -202,7 +202,7 @@ def train_denoiser(
     # (the divergence check too); on the CPU nothing waits, and each step is checked as it comes.
     per_step_check = accel.device.type == "cpu"
     window: list[torch.Tensor] = []
-    window_terms: dict[str, list[float]] = {}
+    window_terms: dict[str, list[torch.Tensor]] = {}
     bar = loss_bar(progress, cfg.steps, step)
     net.train()
     while step < cfg.steps:
