@@ -170,8 +170,8 @@ def _markdown(result: dict) -> str:
         "",
         f"Written by `python scripts/biomodiffuse_table.py` ({meta['split']} split, {meta['repeats']} repeats, "
         f"mean ± 95 % half-width). Every model: 1D UNet, width {meta['d_model']}, {meta['layers']} levels, "
-        f"{meta['steps']} steps, batch {meta['batch']}, crop {meta['crop']}, seed {meta['seed']}, trained and "
-        f"sampled on {meta['device']}. Sampling: "
+        f"{meta['steps']} steps, batch {meta['batch']}, crop {meta['crop']}, seed {meta['seed']}, "
+        f"trained and sampled on {meta['device']}. Sampling: "
         f"{meta['sampler']['sampler']}, {meta['sampler']['steps']} steps, CFG {meta['sampler']['cfg_scale']:g}; "
         "no projection.",
         "",
