@@ -20,6 +20,8 @@ import sys
 from dataclasses import asdict, replace
 from pathlib import Path
 
+import torch
+
 from physmotion.diffusion.denoiser import DenoiserConfig
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.train import STATE_FILE, TrainConfig, train_denoiser
@@ -52,7 +54,7 @@ def train_runs(args: argparse.Namespace, only: str | None = None) -> dict[str, M
         den = DenoiserConfig(arch=spec["arch"], d_model=args.d_model, layers=args.layers)
         cfg = TrainConfig(data=str(data), out=str(out), denoiser=den, crop=args.crop, batch_size=args.batch,
                           steps=args.steps, seed=args.seed, phys_drop=spec["phys_drop"],
-                          device=args.device)  # fmt: skip
+                          device=args.device, bf16=args.bf16)  # fmt: skip
         done = (out / "config.json").is_file() and MotionDiffusion.load(out).info.get("steps") == args.steps
         if not done:
             print(f"training {run} to step {args.steps} in {out}", file=sys.stderr)
@@ -99,9 +101,14 @@ def main() -> None:
     parser.add_argument("--speed-repeats", type=int, default=1, help="repeats of each Table 6 row")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--device", default="cpu", help="where to train and sample: cpu or cuda")
+    parser.add_argument("--bf16", action=argparse.BooleanOptionalAction, default=None,
+                        help="bf16 autocast in training (default: where the hardware has it natively; the "
+                             "committed table: --no-bf16)")
     parser.add_argument("--train-only", choices=list(RUNS), default=None,
                         help="train this one run and stop (several runs can then train side by side)")
     args = parser.parse_args()
+    if args.device.startswith("cuda"):
+        torch.set_float32_matmul_precision("high")  # TF32 matmuls, as the committed table's GPU run
 
     models = train_runs(args, args.train_only)
     if args.train_only:
@@ -130,6 +137,7 @@ def main() -> None:
             "crop": args.crop,
             "batch": args.batch,
             "device": args.device,
+            "bf16": args.bf16,
             "repeats": args.repeats,
             "speed_repeats": args.speed_repeats,
             "seed": args.seed,
