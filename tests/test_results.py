@@ -78,10 +78,10 @@ def schedule_quotes() -> list[str]:
     ]
 
 
-def morph_quotes() -> list[str]:
-    """Morph's table (results/morph.json, scripts/morph_table.py) as the README and the Morph card quote it:
-    each figure from the base model through every round in the table."""
-    rows = _load("morph.json")["rows"]
+def morph_quotes(name: str = "morph.json") -> list[str]:
+    """A Morph table (results/morph.json, or results/morph_ilc.json: the chain synthesised under ILC; both
+    by scripts/morph_table.py) as the docs quote it: each figure from the base model through every round."""
+    rows = _load(name)["rows"]
     models = ["base"] + sorted({r.rsplit(" ", 1)[0] for r in rows if r.startswith("round ")})
     err = {r: rows[r]["phys_err"]["mean"] for r in rows if r != "real"}
 
@@ -149,6 +149,8 @@ QUOTES = {  # which doc quotes which result file
     ("model card", "bench"): bench_quotes,
     ("README", "morph"): morph_quotes,
     ("morph card", "morph"): morph_quotes,
+    ("README", "morph ilc"): lambda: morph_quotes("morph_ilc.json"),
+    ("results", "morph ilc"): lambda: morph_quotes("morph_ilc.json"),
     ("README", "dynamic"): dynamic_quotes,
     ("results", "dynamic"): dynamic_quotes,
     ("results", "new prompts"): new_prompts_quotes,
@@ -160,7 +162,7 @@ QUOTES = {  # which doc quotes which result file
 def _section(text: str, source: str) -> str:
     """The paragraph(s) of a doc that quote ``source``: those naming its file or command."""
     files = {"evaluate": "evaluate_default", "bench": "physdiff_quality", "schedule": "schedule_study",
-             "morph": "results/morph.md", "dynamic": "projection_dynamic",
+             "morph": "results/morph.md", "morph ilc": "results/morph_ilc.md", "dynamic": "projection_dynamic",
              "new prompts": "new_prompts_default", "biomodiffuse": "results/biomodiffuse"}
     marker = files[source]
     return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
