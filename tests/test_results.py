@@ -162,7 +162,8 @@ QUOTES = {  # which doc quotes which result file
 def _section(text: str, source: str) -> str:
     """The paragraph(s) of a doc that quote ``source``: those naming its file or command."""
     files = {"evaluate": "evaluate_default", "bench": "physdiff_quality", "schedule": "schedule_study",
-             "morph": "results/morph.md", "morph ilc": "results/morph_ilc.md", "dynamic": "projection_dynamic",
+             "morph": "results/morph.md", "morph ilc": "results/morph_ilc.md",
+             "dynamic": "projection_dynamic",
              "new prompts": "new_prompts_default", "biomodiffuse": "results/biomodiffuse"}
     marker = files[source]
     return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
