@@ -31,6 +31,10 @@ data_app = typer.Typer(help="Build and inspect HumanML3D-layout datasets.", no_a
 app.add_typer(data_app, name="data")
 console = Console(soft_wrap=True)
 OVERWRITE_HELP = "Replace existing output instead of refusing."
+SAMPLER_HELP = ("ddim, ddpm, dpmpp (DPM-Solver++ 2M, Karras) or dpmpp-sde (its SDE variant; a BioMoDiffuse "
+                "model's default, with 10 steps) (default: ddim).")
+ETA_HELP = "DDIM eta: 0 deterministic, 1 ancestral (DDPM-like) (default: 0)."
+CFG_HELP = "Classifier-free guidance scale (default: 2.5)."
 
 
 def _version(value: bool) -> None:
@@ -348,12 +352,10 @@ def generate_cmd(
         "inference) (default: physdiff:end:4,space:1)."),
     num: int | None = typer.Option(None, help="Samples per caption (default: 1)."),
     seed: int | None = typer.Option(None, help="Random seed; the same seed gives the same motions (default: 0)."),
-    sampler: str | None = typer.Option(None, help="ddim, ddpm, dpmpp (DPM-Solver++ 2M, Karras) or dpmpp-sde "
-                                       "(its SDE variant; a BioMoDiffuse model's default, with 10 steps) "
-                                       "(default: ddim)."),
+    sampler: str | None = typer.Option(None, help=SAMPLER_HELP),
     steps: int | None = typer.Option(None, help="Sampling steps (default: 50)."),
-    eta: float | None = typer.Option(None, help="DDIM eta (default: 0)."),
-    cfg_scale: float | None = typer.Option(None, help="Classifier-free guidance scale (default: 2.5)."),
+    eta: float | None = typer.Option(None, help=ETA_HELP),
+    cfg_scale: float | None = typer.Option(None, help=CFG_HELP),
     phys_scale: float | None = typer.Option(None, help="BioMoDiffuse models only: physics guidance weight, "
                                             "0 = without the physical network (default: 1)."),
     speed: float | None = typer.Option(None, help="BioMoDiffuse models only: speed control signal, scales "
@@ -532,6 +534,9 @@ def evaluate_cmd(
         None, help="Repeated generation runs (95% intervals over them) (default: 3)."),
     steps: int | None = typer.Option(None, help="Sampling steps of the model's sampler; a BioMoDiffuse model "
                                      "samples 10 SDE DPM-Solver++ steps (default: 50)."),
+    sampler: str | None = typer.Option(None, help=SAMPLER_HELP),
+    eta: float | None = typer.Option(None, help=ETA_HELP),
+    cfg_scale: float | None = typer.Option(None, help=CFG_HELP),
     seed: int | None = typer.Option(None, help="Random seed (default: 0)."),
     quick: bool = typer.Option(False, "--quick", help="Smoke run: 32 motions, 2 repeats, 10 steps."),
     out: Path = typer.Option(Path("results/evaluate"), "-o", "--out", help="Writes <out>.md and <out>.json."),
@@ -552,7 +557,10 @@ def evaluate_cmd(
     cfg = _with(EvaluateConfig.quick() if quick else EvaluateConfig(), modes=modes, split=split, seed=seed,
                 repeats=None if quick else repeats)
     net, judge = MotionDiffusion.load(model), Evaluator.load(evaluator)
-    cfg.base.sampler = _with(default_sampler(net), steps=cfg.base.sampler.steps if quick else steps)
+    cfg.base.sampler = _with(default_sampler(net), steps=cfg.base.sampler.steps if quick else steps,
+                             sampler=sampler, eta=eta, cfg_scale=cfg_scale)
+    cfg.base.sampler.check()
+    cfg.base.sampler.check_model(net)
     with _step_bar("evaluating") as tick:
         table = evaluate(net, judge, data, cfg, on_progress=tick)
     paths = table.write(out)

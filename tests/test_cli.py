@@ -196,8 +196,10 @@ def test_help_defaults_are_the_dataclasses() -> None:
 
     ev = EvaluateConfig()
     expected = {"split": ev.split, "physics": ",".join(ev.modes), "repeats": ev.repeats,
-                "steps": ev.base.sampler.steps, "seed": ev.seed}  # fmt: skip
-    assert _help_defaults("evaluate") == {k: str(v) for k, v in expected.items()}
+                "steps": ev.base.sampler.steps, "seed": ev.seed, "sampler": ev.base.sampler.sampler,
+                "eta": ev.base.sampler.eta, "cfg-scale": ev.base.sampler.cfg_scale}  # fmt: skip
+    assert _help_defaults("evaluate") == {k: f"{v:g}" if isinstance(v, float) else str(v)
+                                          for k, v in expected.items()}  # fmt: skip
 
 
 # --- BioMoDiffuse options: data build --features, train denoiser --arch biomo, generate --phys-scale/--speed ---

@@ -8,11 +8,12 @@ from tests.test_cli import run
 def test_evaluate_quick_writes_markdown_and_json(tiny_model_dir, tiny_evaluator_dir, built_dir, tmp_path):
     out = tmp_path / "res" / "quick"
     res = run("evaluate", "--data", built_dir, "--model", tiny_model_dir, "--evaluator", tiny_evaluator_dir,
-              "--physics", "none,post:1", "--quick", "-o", out)
+              "--physics", "none,post:1", "--quick", "--eta", "1", "-o", out)
     assert res.returncode == 0, res.stderr
     assert "| real |" in res.stdout and "| post:1 |" in res.stdout
     data = json.loads(out.with_suffix(".json").read_text())
     assert set(data["rows"]) == {"real", "none", "post:1"} and data["meta"]["motions"] == 32
+    assert data["meta"]["sampler"]["eta"] == 1.0 and data["meta"]["sampler"]["steps"] == 10
 
 
 def test_evaluate_bad_input_is_one_line(tiny_model_dir, tiny_evaluator_dir, built_dir, tmp_path):
@@ -20,6 +21,8 @@ def test_evaluate_bad_input_is_one_line(tiny_model_dir, tiny_evaluator_dir, buil
         ("--physics", "none,walk"),
         ("--physics", "physdiff:end:99,space:1"),
         ("--split", "nosuch"),
+        ("--eta", "2"),
+        ("--sampler", "euler"),
     ]
     for flag, value in cases:
         out = tmp_path / "bad"
