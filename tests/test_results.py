@@ -151,6 +151,7 @@ QUOTES = {  # which doc quotes which result file
     ("morph card", "morph"): morph_quotes,
     ("README", "morph ilc"): lambda: morph_quotes("morph_ilc.json"),
     ("results", "morph ilc"): lambda: morph_quotes("morph_ilc.json"),
+    ("morph card", "morph ilc"): lambda: morph_quotes("morph_ilc.json"),
     ("README", "dynamic"): dynamic_quotes,
     ("results", "dynamic"): dynamic_quotes,
     ("results", "new prompts"): new_prompts_quotes,
