@@ -559,8 +559,6 @@ def evaluate_cmd(
     net, judge = MotionDiffusion.load(model), Evaluator.load(evaluator)
     cfg.base.sampler = _with(default_sampler(net), steps=cfg.base.sampler.steps if quick else steps,
                              sampler=sampler, eta=eta, cfg_scale=cfg_scale)
-    cfg.base.sampler.check()
-    cfg.base.sampler.check_model(net)
     with _step_bar("evaluating") as tick:
         table = evaluate(net, judge, data, cfg, on_progress=tick)
     paths = table.write(out)

@@ -151,7 +151,9 @@ def evaluate(
 ) -> EvalTable:
     """The table for ``config.modes`` on ``data``'s split, with a real-data row first."""
     cfg = config or EvaluateConfig()
-    modes = [PhysicsMode.parse(m) for m in cfg.modes]  # bad modes fail before any work
+    modes = [PhysicsMode.parse(m) for m in cfg.modes]  # bad modes and sampler settings fail before any work
+    cfg.base.sampler.check()
+    cfg.base.sampler.check_model(model)
     for mode in modes:
         mode.hook_steps(cfg.base.sampler.steps)
     gen_configs = {str(mode): replace(cfg.base, physics=mode) for mode in modes}
