@@ -471,24 +471,36 @@ def train_denoiser_cmd(
                                             "(default: 1.0)."),
     phys_drop: float | None = typer.Option(None, help="biomo: probability P_c of dropping the physical "
                                            "network, for physics guidance (default: 0.1)."),
+    vel_weight: float | None = typer.Option(None, help="Weight of the velocity loss, the x0 error's "
+                                            "frame-to-frame differences (MDM's lambda_vel) (default: 0.0)."),
+    warmup: int | None = typer.Option(None, help="Steps of linear learning-rate warm-up (default: 200)."),
+    init: Path | None = typer.Option(None, help="Start from this model folder's weights (fine-tuning); its "
+                                     "shape replaces --arch, --d-model, --layers and --heads."),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in --out where it stopped."),
 ) -> None:
     """Train a text-to-motion denoiser (DDPM, x0 prediction, EMA, classifier-free text dropout).
 
     Unset options take TrainConfig's and DenoiserConfig's defaults (the values the help quotes)."""
     from physmotion.diffusion.denoiser import DenoiserConfig
+    from physmotion.diffusion.model import MotionDiffusion
     from physmotion.diffusion.train import TrainConfig, train_denoiser
     from physmotion.paths import check_output
 
+    if init is not None and any(v is not None for v in (arch, d_model, layers, heads)):
+        raise PhysmotionError("--init takes the starting model's shape: leave out --arch, --d-model, "
+                              "--layers and --heads")  # fmt: skip
     # A run folder is never replaced: a finished or interrupted run is hours of work (no --overwrite).
     check_output(out, "folder", overwrite=resume,
                  hint="pass --resume to continue its run, or choose another -o")
+    start = MotionDiffusion.load(init) if init is not None else None
 
     den = _with(DenoiserConfig(), arch=arch, d_model=d_model, layers=layers, heads=heads)
     cfg = _with(TrainConfig(data=str(data), out=str(out), denoiser=den), crop=crop, batch_size=batch_size,
                 steps=steps, lr=lr, bf16=bf16, device=device, seed=seed, checkpoint_minutes=checkpoint_minutes,
-                accel_weight=accel_weight, phys_weight=phys_weight, emg_weight=emg_weight, phys_drop=phys_drop)
-    result = train_denoiser(cfg, resume=resume, progress=sys.stderr.isatty())
+                accel_weight=accel_weight, phys_weight=phys_weight, emg_weight=emg_weight,
+                phys_drop=phys_drop, vel_weight=vel_weight, warmup=warmup)  # fmt: skip
+    info = {"init": {"model": str(init), "steps": start.info.get("steps")}} if start is not None else None
+    result = train_denoiser(cfg, resume=resume, progress=sys.stderr.isatty(), init=start, info=info)
     last = f", last loss {result.losses[-1][1]:.4f}" if result.losses else ""
     console.print(f"trained to step {result.step} in {result.seconds / 60:.1f} min{last}; model in {out}",
                   highlight=False)

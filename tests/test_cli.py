@@ -188,7 +188,8 @@ def test_help_defaults_are_the_dataclasses() -> None:
                 "crop": train.crop, "batch-size": train.batch_size, "steps": train.steps, "lr": train.lr,
                 "device": train.device, "seed": train.seed, "checkpoint-minutes": train.checkpoint_minutes,
                 "accel-weight": train.accel_weight, "phys-weight": train.phys_weight,
-                "emg-weight": train.emg_weight, "phys-drop": train.phys_drop}  # fmt: skip
+                "emg-weight": train.emg_weight, "phys-drop": train.phys_drop, "vel-weight": train.vel_weight,
+                "warmup": train.warmup}  # fmt: skip
     stated = _help_defaults("train", "denoiser")
     assert set(stated) == set(expected)
     for name, value in expected.items():
@@ -254,6 +255,28 @@ def test_train_biomo_options(built329_dir: Path, tmp_path: Path) -> None:
     weights = (train["accel_weight"], train["phys_weight"], train["emg_weight"], train["phys_drop"])
     assert weights == (0.5, 2, 3, 0.25)
     assert (out / "loss.csv").read_text().splitlines()[0] == "step,loss,diffusion,accel,phys,emg"
+
+
+def test_train_from_a_model_with_the_velocity_loss(built_dir: Path, tiny_model_dir: Path,
+                                                  tmp_path: Path) -> None:  # fmt: skip
+    """--init fine-tunes a model folder (its shape, its weights at step 0); --vel-weight logs the term."""
+    out = tmp_path / "run"
+    common = ["train", "denoiser", "--data", built_dir, "--out", out, "--init", tiny_model_dir]
+    res = run(*common, "--layers", "2", "--steps", "2")
+    assert res.returncode == 1 and res.stderr.startswith("error: --init") and res.stderr.count("\n") == 1
+    assert not out.exists()
+    res = run(*common, "--batch-size", "4", "--crop", "40", "--steps", "2", "--vel-weight", "0.5",
+              "--warmup", "1")  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    config = json.loads((out / "config.json").read_text())
+    start = json.loads((tiny_model_dir / "config.json").read_text())
+    assert config["denoiser"] == start["denoiser"]  # the starting model's shape, not the defaults
+    assert config["info"]["init"] == {"model": str(tiny_model_dir), "steps": start["info"]["steps"]}
+    assert (config["info"]["train"]["vel_weight"], config["info"]["train"]["warmup"]) == (0.5, 1)
+    header, *rows = (out / "loss.csv").read_text().splitlines()
+    assert header == "step,loss,diffusion,vel" and rows
+    step, loss, diffusion, vel = map(float, rows[-1].split(","))
+    assert loss == pytest.approx(diffusion + 0.5 * vel, abs=2e-6) and vel > 0  # loss.csv: 6 decimals
 
 
 def test_data_build_refuses_other_feature_widths(mocap_dir: Path, tmp_path: Path) -> None:

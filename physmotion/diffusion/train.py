@@ -86,6 +86,10 @@ class TrainConfig:
     phys_weight: float = 1.0
     emg_weight: float = 1.0
     phys_drop: float = 0.1
+    # MDM's velocity loss (lambda_vel), here on the features: vel_weight * MSE of the frame-to-frame
+    # differences of the predicted x0 against the true ones; 0 leaves it out (docs/decisions.md,
+    # "velocity loss").
+    vel_weight: float = 0.0
     bf16: bool | None = None  # bf16 autocast; None: where the hardware has it natively (bf16_helps)
     device: str = "cpu"
     seed: int = 0
@@ -233,7 +237,8 @@ def train_denoiser(
                                    physics=True)  # fmt: skip
             else:
                 pred, acc, u = net(xt, t.to(accel.device), text, mask, drop.to(accel.device)), None, None
-        parts = loss_terms(pred.float(), x0, mask, acc, u, batch.get("activations"), accel.unwrap_model(net))
+        parts = loss_terms(pred.float(), x0, mask, acc, u, batch.get("activations"), accel.unwrap_model(net),
+                           velocity=cfg.vel_weight > 0)  # fmt: skip
         loss = _weighted(parts, cfg)
         if per_step_check:
             check_finite(loss, step)
@@ -279,19 +284,25 @@ def loss_terms(
     u: torch.Tensor | None = None,
     activations: torch.Tensor | None = None,
     net: torch.nn.Module | None = None,
+    velocity: bool = False,
 ) -> dict[str, torch.Tensor]:
     """The unweighted loss terms of one batch (normalised feature units).
 
     pred, x0: (B, T, D) predicted and true x0; mask (B, T). D = 263: ``diffusion`` only (MDM's x0 MSE).
     D = 329: ``diffusion`` over the 263 HumanML3D dims and ``accel`` (BioMoDiffuse's L_accel, Eq. 8) over
     the 66 joint-acceleration dims. With the physical network's acc (B, T, 22, 3) m/s^2 and u (B, T, 8):
-    ``phys`` (L_phys: acc against the true accelerations) and ``emg`` (u against ``activations``)."""
-    if pred.shape[-1] != FEATURE_DIM_BIOMECH:
-        return {"diffusion": masked_mse(pred, x0, mask)}
+    ``phys`` (L_phys: acc against the true accelerations) and ``emg`` (u against ``activations``).
+    velocity: also ``vel``, the MSE of the first time differences over the HumanML3D dims (pairs of valid
+    frames only), i.e. the frame-to-frame part of the error, where the samples' jerk lives."""
     hml, jacc = slice(0, FEATURE_DIM), SLICES_BIOMECH["joint_acc"]
-    out = {"diffusion": masked_mse(pred[..., hml], x0[..., hml], mask),
-           "accel": masked_mse(pred[..., jacc], x0[..., jacc], mask)}  # fmt: skip
-    if acc is not None and net is not None:
+    biomech = pred.shape[-1] == FEATURE_DIM_BIOMECH
+    out = {"diffusion": masked_mse(pred[..., hml], x0[..., hml], mask)}
+    if biomech:
+        out["accel"] = masked_mse(pred[..., jacc], x0[..., jacc], mask)
+    if velocity:
+        d_pred, d_true = (v[:, 1:, hml] - v[:, :-1, hml] for v in (pred, x0))
+        out["vel"] = masked_mse(d_pred, d_true, mask[:, 1:] & mask[:, :-1])
+    if biomech and acc is not None and net is not None:
         out["phys"] = masked_mse(net.physics.to_features(acc.float()), x0[..., jacc], mask)
         if u is not None and activations is not None:
             out["emg"] = masked_mse(u.float(), activations.to(u.device), mask)
@@ -299,7 +310,8 @@ def loss_terms(
 
 
 def _weighted(parts: dict[str, torch.Tensor], cfg: TrainConfig) -> torch.Tensor:
-    weights = {"diffusion": 1.0, "accel": cfg.accel_weight, "phys": cfg.phys_weight, "emg": cfg.emg_weight}
+    weights = {"diffusion": 1.0, "accel": cfg.accel_weight, "phys": cfg.phys_weight, "emg": cfg.emg_weight,
+               "vel": cfg.vel_weight}  # fmt: skip
     return sum(weights[k] * v for k, v in parts.items())
 
 

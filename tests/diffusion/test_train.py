@@ -164,6 +164,26 @@ def test_loss_terms_of_263_and_329_features() -> None:
     assert float(again["accel"]) == 0.0 and float(again["diffusion"]) == pytest.approx(float(parts["diffusion"]))
 
 
+def test_velocity_term_sees_only_the_frame_to_frame_error() -> None:
+    pred, x0, mask = _batch(263)
+    offset = x0 + 0.5  # the same error in every frame: an x0 loss, no velocity loss
+    parts = loss_terms(offset, x0, mask, velocity=True)
+    assert set(parts) == {"diffusion", "vel"}
+    assert float(parts["vel"]) == pytest.approx(0.0, abs=1e-10)
+    assert float(parts["diffusion"]) == pytest.approx(0.25)
+    flicker = x0 + 0.5 * (-1.0) ** torch.arange(x0.shape[1])[None, :, None]  # +-0.5 alternating: jerk
+    parts = loss_terms(flicker, x0, mask, velocity=True)
+    assert float(parts["diffusion"]) == pytest.approx(0.25) and float(parts["vel"]) == pytest.approx(1.0)
+    flicker[2, 5:] = 1e3  # the last row's padding: neither its frames nor the pair across its end count
+    assert float(loss_terms(flicker, x0, mask, velocity=True)["vel"]) == pytest.approx(1.0)
+    pred, x0, mask = _batch(329)
+    parts = loss_terms(pred, x0, mask, velocity=True)  # 329-d: over the 263 HumanML3D dims, beside L_accel
+    assert set(parts) == {"diffusion", "accel", "vel"}
+    d = (pred - x0)[..., :263]
+    pairs = mask[:, 1:] & mask[:, :-1]
+    assert float(parts["vel"]) == pytest.approx(_mse(d[:, 1:], d[:, :-1], pairs), rel=1e-5)
+
+
 def test_loss_terms_of_the_physical_network(built329_dir: Path) -> None:
     """L_phys compares the network's m/s^2 with the data's joint_acc in the data's units; L_emg its
     activations with the cached ones."""
