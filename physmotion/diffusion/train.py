@@ -181,6 +181,9 @@ def train_denoiser(
         net.physics.set_feature_stats(torch.from_numpy(stats.mean), torch.from_numpy(stats.std))
     if init is not None:
         net.load_state_dict(init.net.state_dict())
+        # a fine-tuned model has seen its start's data too: its licence tags carry over (NC stays NC)
+        tags = sorted(set(init.info.get("licence_tags", ["unknown"])) | set(_data_licence_tags(cfg.data)))
+        info = {"licence_tags": tags} | (info or {})
     opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     # foreach: a few fused kernels per EMA update instead of several per tensor (launch-bound on a GPU)
     ema = EMAModel(net.parameters(), decay=cfg.ema_decay, foreach=cfg.device != "cpu")
@@ -327,6 +330,12 @@ def _check_biomo_data(root: str | Path) -> None:
         raise PhysmotionError(f"{root}: --arch biomo needs cached muscle activations; {how}")
 
 
+def _data_licence_tags(data: str | Path) -> list[str]:
+    """The licence tags a built dataset's ``build_info.json`` names (["unknown"] without one)."""
+    path = Path(data) / "build_info.json"
+    return json.loads(path.read_text()).get("licence_tags", ["unknown"]) if path.is_file() else ["unknown"]
+
+
 def _save(cfg: TrainConfig, out: Path, net: torch.nn.Module, opt, ema, step: int, losses: list,
           terms: list, dataset: Dataset, extra: dict | None = None) -> None:  # fmt: skip
     """Checkpoint: resumable state first, then the EMA model for sampling, then the loss log."""
@@ -337,9 +346,7 @@ def _save(cfg: TrainConfig, out: Path, net: torch.nn.Module, opt, ema, step: int
     ema_net = build_denoiser(cfg.denoiser)
     ema_net.load_state_dict(net.state_dict())  # buffers (the physical network's feature statistics) too:
     ema.copy_to(ema_net.parameters())  # the EMA holds the parameters only
-    info_path = Path(cfg.data) / "build_info.json"
-    build_info = json.loads(info_path.read_text()) if info_path.is_file() else {}
-    info = {"data": str(cfg.data), "licence_tags": build_info.get("licence_tags", ["unknown"]),
+    info = {"data": str(cfg.data), "licence_tags": _data_licence_tags(cfg.data),
             "train_items": len(dataset), "steps": step, "train": _summary(cfg)} | (extra or {})  # fmt: skip
     if cfg.denoiser.arch == "biomo":  # what a model card must say about the muscle term
         info["muscle_activations"] = ACTIVATIONS_ORIGIN

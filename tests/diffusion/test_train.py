@@ -66,6 +66,17 @@ def test_resume_and_overwrite_guards(built_dir: Path, tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
+def test_fine_tuning_keeps_the_starting_models_licence_tags(built_dir: Path, tiny_model: MotionDiffusion,
+                                                            tmp_path: Path) -> None:  # fmt: skip
+    """A model fine-tuned from another has seen that one's data too: its tags join the build's."""
+    start = copy.copy(tiny_model)
+    start.info = tiny_model.info | {"licence_tags": ["NC-other-source"]}
+    out = tmp_path / "ft"
+    train_denoiser(tiny_config(built_dir, out, steps=1, d_model=32, layers=1), init=start, progress=False)
+    build_tags = json.loads((built_dir / "build_info.json").read_text())["licence_tags"]
+    assert MotionDiffusion.load(out).info["licence_tags"] == sorted({"NC-other-source", *build_tags})
+
+
 def test_overfits_a_single_clip(one_clip_dir: Path, tmp_path: Path) -> None:
     """The denoiser learns one real walk well enough that sampling gives it back."""
     cfg = tiny_config(one_clip_dir, tmp_path / "run", d_model=128, steps=400, random_crop=False,
