@@ -453,6 +453,9 @@ def train_denoiser_cmd(
     heads: int | None = typer.Option(None, help="Attention heads (default: 4)."),
     crop: int | None = typer.Option(
         None, help="Training windows are cropped to at most this many frames (default: 196)."),
+    max_length: int | None = typer.Option(
+        None, help="Leave out motions of this many frames + 4 or more (HumanML3D's filter; the default "
+        "model saw those under 124) (default: 196)."),
     batch_size: int | None = typer.Option(None, help="Batch size (default: 32)."),
     steps: int | None = typer.Option(None, help="Total optimiser steps (default: 10000)."),
     lr: float | None = typer.Option(None, help="AdamW learning rate (default: 0.0002)."),
@@ -495,10 +498,10 @@ def train_denoiser_cmd(
     start = MotionDiffusion.load(init) if init is not None else None
 
     den = _with(DenoiserConfig(), arch=arch, d_model=d_model, layers=layers, heads=heads)
-    cfg = _with(TrainConfig(data=str(data), out=str(out), denoiser=den), crop=crop, batch_size=batch_size,
-                steps=steps, lr=lr, bf16=bf16, device=device, seed=seed, checkpoint_minutes=checkpoint_minutes,
-                accel_weight=accel_weight, phys_weight=phys_weight, emg_weight=emg_weight,
-                phys_drop=phys_drop, vel_weight=vel_weight, warmup=warmup)  # fmt: skip
+    cfg = _with(TrainConfig(data=str(data), out=str(out), denoiser=den), crop=crop, max_length=max_length,
+                batch_size=batch_size, steps=steps, lr=lr, bf16=bf16, device=device, seed=seed,
+                checkpoint_minutes=checkpoint_minutes, accel_weight=accel_weight, phys_weight=phys_weight,
+                emg_weight=emg_weight, phys_drop=phys_drop, vel_weight=vel_weight, warmup=warmup)  # fmt: skip
     info = {"init": {"model": str(init), "steps": start.info.get("steps")}} if start is not None else None
     result = train_denoiser(cfg, resume=resume, progress=sys.stderr.isatty(), init=start, info=info)
     last = f", last loss {result.losses[-1][1]:.4f}" if result.losses else ""

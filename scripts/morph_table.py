@@ -6,7 +6,9 @@ runs `physmotion evaluate` on the base model and on every ``<run>/round_<k>/mode
 run` wrote, on the same split, captions, lengths and seeds, and writes one table (<out>.md, <out>.json):
 rows "<model> <mode>" (e.g. "base physdiff:end:4,space:1", "round 1 morph"), plus the real motions, with
 each round's synthetic-data figures (items, refined kept, IFR) from ``<run>/rounds.json`` in the JSON's meta.
-Each (model, mode) table is kept in ``<out>.parts/`` and reused by a re-run with the same settings.
+Each (model, mode) table is kept in ``<out>.parts/`` and reused by a re-run with the same settings and
+the same weights (sha256). The base model is the one the run recorded; a folder whose weights changed
+since (the shipped default after a new release) is refused: pass the run's base with ``--base``.
 It is a script rather than a command because it is a study over several models.
 """
 
@@ -17,7 +19,8 @@ import json
 import sys
 from pathlib import Path
 
-from physmotion.diffusion.model import MotionDiffusion
+from physmotion.checkpoint import weights_sha256
+from physmotion.diffusion.model import DEFAULT_MODEL_DIR, MotionDiffusion
 from physmotion.errors import PhysmotionError
 from physmotion.eval.evaluator import Evaluator
 from physmotion.eval.table import REAL, EvalTable, EvaluateConfig, evaluate
@@ -36,6 +39,18 @@ def _rounds(run: Path) -> list[tuple[str, Path]]:
     return [(f"round {k}", p) for k, p in found]
 
 
+def _base(run: Path, base: str | None) -> Path:
+    """The run's base model folder: ``base``, else the one ``<run>/rounds.json`` names; its weights must be
+    the ones the run started from."""
+    summary = run / "rounds.json"
+    meta = json.loads(summary.read_text())["meta"] if summary.is_file() else {}
+    folder = Path(base or meta.get("base_model") or DEFAULT_MODEL_DIR)
+    if meta.get("base_model_sha256") and weights_sha256(folder) != meta["base_model_sha256"]:
+        raise PhysmotionError(f"{folder}'s weights are not those {run} started from (sha256 "
+                              f"{meta['base_model_sha256'][:12]}): pass --base with that model")
+    return folder
+
+
 def morph_table(data: str, run: Path, base: str | None, cfg: EvaluateConfig, evaluator: Evaluator,
                 parts: Path) -> EvalTable:  # fmt: skip
     """One EvalTable over the base model (BASE_MODES) and every round of ``run`` (ROUND_MODES).
@@ -47,22 +62,23 @@ def morph_table(data: str, run: Path, base: str | None, cfg: EvaluateConfig, eva
 
     rows: dict = {}
     meta: dict = {"models": {}, "rounds": {}}
-    for name, folder, modes in [("base", base, BASE_MODES)] + [(n, f, ROUND_MODES) for n, f in _rounds(run)]:
-        net = None
+    base_dir = _base(run, base)
+    for name, folder, modes in [("base", base_dir, BASE_MODES)] + [(n, f, ROUND_MODES) for n, f in _rounds(run)]:
+        net, sha = None, weights_sha256(folder)
         for mode in (str(m) for m in parse_modes(modes)):
             run_cfg = replace(cfg, modes=(mode,))
             part = parts / f"{name.replace(' ', '_')}__{mode.replace(':', '_').replace(',', '_')}.json"
             table = EvalTable.from_json(part) if part.is_file() else None
             wanted = {"modes": [mode], "repeats": run_cfg.repeats, "split": run_cfg.split, "seed": run_cfg.seed,
-                      "model_folder": str(folder or "default")}  # fmt: skip
+                      "model_sha256": sha}  # fmt: skip
             if table is None or {k: table.meta.get(k) for k in wanted} != wanted:
                 net = net or MotionDiffusion.load(folder)
                 table = evaluate(net, evaluator, data, run_cfg)
-                table.meta["model_folder"] = wanted["model_folder"]
+                table.meta.update(model_folder=str(folder), model_sha256=sha)
                 table.write(part.with_suffix(""))
             rows.setdefault(REAL, table.rows[REAL])
             rows[f"{name} {mode}"] = table.rows[mode]
-            meta["models"].setdefault(name, {"folder": str(folder or "default"), **table.meta, "modes": []})
+            meta["models"].setdefault(name, {"folder": str(folder), **table.meta, "modes": []})
             meta["models"][name]["modes"].append(mode)
     first = next(iter(meta["models"].values()))  # every model ran on the same split, sampler and surface
     meta.update({k: first[k] for k in ("split", "motions", "repeats", "sampler", "surface", "seed", "data")})
@@ -77,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--data", required=True, help="HumanML3D-layout folder")
     parser.add_argument("--run", required=True, type=Path, help="a `physmotion morph run` folder")
     parser.add_argument("-o", "--out", default="results/morph", help="output stem")
-    parser.add_argument("--base", default=None, help="base model folder (default: the shipped model)")
+    parser.add_argument("--base", default=None, help="base model folder (default: the one the run names)")
     parser.add_argument("--evaluator", default=None, help="evaluator folder (default: the shipped one)")
     parser.add_argument("--split", default="test")
     parser.add_argument("--repeats", type=int, default=EvaluateConfig.repeats)

@@ -69,6 +69,9 @@ class TrainConfig:
     diffusion: DiffusionConfig = field(default_factory=DiffusionConfig)
     text_encoder: str = "minilm"
     crop: int = MAX_FRAMES  # training windows are cropped to at most this many frames
+    # Motions of max_length + 4 frames or more are left out (HumanML3D's length filter). Lowering it
+    # fine-tunes a model on the motions it was trained on: the default model saw those under 124 frames.
+    max_length: int = MAX_FRAMES
     random_crop: bool = True  # HumanML3D's random windows and captions; False: the start, first caption
     batch_size: int = 32
     steps: int = 10000
@@ -151,15 +154,18 @@ def train_denoiser(
         raise PhysmotionError(f"{out} already holds a training run: pass --resume or choose another --out")
     if cfg.denoiser.max_frames < cfg.crop:
         raise PhysmotionError(f"crop {cfg.crop} is longer than the model's {cfg.denoiser.max_frames} frames")
+    if not cfg.crop <= cfg.max_length <= MAX_FRAMES:
+        raise PhysmotionError(f"max length {cfg.max_length} must lie between the crop ({cfg.crop}) and "
+                              f"{MAX_FRAMES}")
 
-    # The crop sets the window length only: every motion of up to 196 frames is kept and cropped. (Up to
-    # step 7904 the shipped model's run passed the crop as max_frames, which dropped the longer ones.)
+    # The crop sets the window length only; max_length decides which motions are kept. (Up to step 7904
+    # the shipped model's run passed the crop as max_frames, which dropped the longer ones.)
     biomo = (init.denoiser if init is not None else cfg.denoiser).arch == "biomo"
     if dataset is None:
         if biomo:
             _check_biomo_data(cfg.data)
         dataset = MotionDataset(cfg.data, "train", crop=cfg.crop, random_crop=cfg.random_crop, seed=cfg.seed,
-                                activations=biomo)  # fmt: skip
+                                max_frames=cfg.max_length, activations=biomo)  # fmt: skip
     encoder = load_text_encoder(cfg.text_encoder)
     if init is not None:
         if init.text_encoder != cfg.text_encoder or init.diffusion != cfg.diffusion:

@@ -65,6 +65,20 @@ def test_resume_and_overwrite_guards(built_dir: Path, tmp_path: Path) -> None:
         train_denoiser(tiny_config(built_dir, tmp_path / "run", steps=2), progress=False)
 
 
+def test_max_length_leaves_out_the_longer_motions(built_dir: Path, tmp_path: Path) -> None:
+    """max_length filters as HumanML3D does (fewer than max_length + 4 frames); the crop only cuts."""
+    from physmotion.data.dataset import load_items
+
+    lengths = [len(item.features) for item in load_items(built_dir, "train")]
+    train_denoiser(tiny_config(built_dir, tmp_path / "short", steps=1, max_length=80), progress=False)
+    train_denoiser(tiny_config(built_dir, tmp_path / "all", steps=1), progress=False)
+    short = json.loads((tmp_path / "short" / "config.json").read_text())["info"]["train_items"]
+    every = json.loads((tmp_path / "all" / "config.json").read_text())["info"]["train_items"]
+    assert every == len(lengths) and 0 < short == sum(n < 84 for n in lengths) < every
+    with pytest.raises(PhysmotionError, match="between the crop"):
+        train_denoiser(tiny_config(built_dir, tmp_path / "bad", max_length=32), progress=False)
+
+
 @pytest.mark.slow
 def test_fine_tuning_keeps_the_starting_models_licence_tags(built_dir: Path, tiny_model: MotionDiffusion,
                                                             tmp_path: Path) -> None:  # fmt: skip
