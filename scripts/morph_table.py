@@ -62,8 +62,8 @@ def morph_table(data: str, run: Path, base: str | None, cfg: EvaluateConfig, eva
 
     rows: dict = {}
     meta: dict = {"models": {}, "rounds": {}}
-    base_dir = _base(run, base)
-    for name, folder, modes in [("base", base_dir, BASE_MODES)] + [(n, f, ROUND_MODES) for n, f in _rounds(run)]:
+    models = [("base", _base(run, base), BASE_MODES)] + [(n, f, ROUND_MODES) for n, f in _rounds(run)]
+    for name, folder, modes in models:
         net, sha = None, weights_sha256(folder)
         for mode in (str(m) for m in parse_modes(modes)):
             run_cfg = replace(cfg, modes=(mode,))
