@@ -266,6 +266,8 @@ def train_denoiser(
                 raise PhysmotionError(f"training diverged between steps {step - len(window) + 1} and {step}")
             losses.append((step, float(np.mean(values))))
             if len(window_terms) > 1 or terms:
+                # a one-term run resumed with more terms: its earlier windows get empty cells in loss.csv
+                terms.extend({} for _ in range(len(losses) - 1 - len(terms)))
                 terms.append({k: float(np.mean(_read(v))) for k, v in window_terms.items()})
             window, window_terms = [], {}
         if bar is not None:

@@ -57,6 +57,17 @@ def test_training_leaves_the_callers_config_alone(built_dir: Path, tmp_path: Pat
     assert (model.denoiser.text_dim, model.denoiser.feature_dim) == (384, 263)
 
 
+def test_resuming_with_a_new_loss_term_logs_it(built_dir: Path, tmp_path: Path) -> None:
+    """A run without the velocity loss, resumed with it: loss.csv gains its columns, empty before."""
+    out = tmp_path / "run"
+    train_denoiser(tiny_config(built_dir, out, steps=5), progress=False)
+    train_denoiser(tiny_config(built_dir, out, steps=10, vel_weight=1.0), resume=True, progress=False)
+    header, first, second = (out / "loss.csv").read_text().splitlines()
+    assert header == "step,loss,diffusion,vel" and first.endswith(",,")
+    step, loss, diffusion, vel = map(float, second.split(","))
+    assert step == 10 and loss == pytest.approx(diffusion + vel, abs=2e-6)
+
+
 def test_resume_and_overwrite_guards(built_dir: Path, tmp_path: Path) -> None:
     with pytest.raises(PhysmotionError, match="nothing to resume"):
         train_denoiser(tiny_config(built_dir, tmp_path / "none"), resume=True, progress=False)
