@@ -185,7 +185,8 @@ def test_help_defaults_are_the_dataclasses() -> None:
 
     train, den = TrainConfig(data="", out=""), DenoiserConfig()
     expected = {"arch": den.arch, "d-model": den.d_model, "layers": den.layers, "heads": den.heads,
-                "crop": train.crop, "batch-size": train.batch_size, "steps": train.steps, "lr": train.lr,
+                "crop": train.crop, "max-length": train.max_length, "batch-size": train.batch_size,
+                "steps": train.steps, "lr": train.lr,
                 "device": train.device, "seed": train.seed, "checkpoint-minutes": train.checkpoint_minutes,
                 "accel-weight": train.accel_weight, "phys-weight": train.phys_weight,
                 "emg-weight": train.emg_weight, "phys-drop": train.phys_drop, "vel-weight": train.vel_weight,
