@@ -24,6 +24,7 @@ from physmotion.diffusion.model import DEFAULT_MODEL_DIR, MotionDiffusion
 from physmotion.errors import PhysmotionError
 from physmotion.eval.evaluator import Evaluator
 from physmotion.eval.table import REAL, EvalTable, EvaluateConfig, evaluate
+from physmotion.morph.loop import read_rounds
 from physmotion.physics_mode import parse_modes
 
 BASE_MODES = "none,none+floor,morph,physdiff:end:4,space:1"
@@ -42,8 +43,7 @@ def _rounds(run: Path) -> list[tuple[str, Path]]:
 def _base(run: Path, base: str | None) -> Path:
     """The run's base model folder: ``base``, else the one ``<run>/rounds.json`` names; its weights must be
     the ones the run started from."""
-    summary = run / "rounds.json"
-    meta = json.loads(summary.read_text())["meta"] if summary.is_file() else {}
+    meta = read_rounds(run)["meta"]
     folder = Path(base or meta.get("base_model") or DEFAULT_MODEL_DIR)
     if meta.get("base_model_sha256") and weights_sha256(folder) != meta["base_model_sha256"]:
         raise PhysmotionError(f"{folder}'s weights are not those {run} started from (sha256 "
