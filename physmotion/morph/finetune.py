@@ -31,13 +31,17 @@ from physmotion.errors import PhysmotionError
 from physmotion.features.normalize import Normalizer
 from physmotion.morph.floor import on_surface, selected_on_surface
 from physmotion.morph.selection import TAU, Selection, read_synth_info, select
+from physmotion.morph.synth import trained_max_length
 from physmotion.training import seeded_generator
 
 SKELETON = "smpl22"
 # Training settings taken from the base model's own run where FinetuneConfig leaves them unset (Sec. 3.3:
 # the original setup); the learning rate is the one setting Morph changes.
-INHERITED = ("batch_size", "crop", "random_crop", "warmup", "weight_decay", "ema_decay", "grad_clip",
-             "text_drop", "log_every")  # fmt: skip
+# The base's loss terms (vel_weight) and its length filter (max_length) belong to that setup too: without them a
+# fine-tune of the default model trains on windows and a loss it never saw (docs/decisions.md: "Morph
+# fine-tuning keeps the base run's loss and length filter").
+INHERITED = ("batch_size", "crop", "max_length", "random_crop", "warmup", "weight_decay", "ema_decay", "grad_clip",
+             "text_drop", "vel_weight", "log_every")  # fmt: skip
 
 
 class FinetuneError(PhysmotionError):
@@ -197,15 +201,17 @@ def _prepare(config: FinetuneConfig, progress: bool = False
     model = MotionDiffusion.load(model_dir)
     check_synth(config.synth, model_dir, model)
     selection = select(config.synth, config.tau)
-    items = selected_items(selection, model.denoiser.feature_dim, model.denoiser.max_frames)
+    base_train = model.info.get("train", {})
+    max_length = trained_max_length(model)
+    items = selected_items(selection, model.denoiser.feature_dim, max_length)
     if config.floor == FLOOR_SURFACE:
         refined = {s.id: s.features_path.parent.parent / "new_joints" / s.features_path.name
                    for s in selection.items if s.source == "refined"}  # fmt: skip
         items = selected_on_surface(items, refined, progress)
-    base_train = model.info.get("train", {})
     given = {"batch_size": config.batch_size, "warmup": config.warmup}
     train = {k: base_train[k] for k in INHERITED if k in base_train} | {k: v for k, v in given.items() if v is not None}
     train["crop"] = min(train.get("crop", model.denoiser.max_frames), model.denoiser.max_frames)
+    train["max_length"] = max_length
     cfg = TrainConfig(data=str(config.data), out=str(config.out), denoiser=model.denoiser,
                       diffusion=model.diffusion, text_encoder=model.text_encoder, steps=config.steps,
                       lr=config.lr, seed=config.seed, checkpoint_minutes=config.checkpoint_minutes,
@@ -215,7 +221,7 @@ def _prepare(config: FinetuneConfig, progress: bool = False
     data_tags: list[str] = []
     if config.mix < 1.0:
         real = MotionDataset(config.data, "train", crop=cfg.crop, random_crop=cfg.random_crop, seed=cfg.seed,
-                             normalize=False, max_frames=model.denoiser.max_frames)  # fmt: skip
+                             normalize=False, max_frames=max_length)  # fmt: skip
         dim = real.items[0].features.shape[-1]
         if dim != model.denoiser.feature_dim:
             raise FinetuneError(f"{config.data} holds {dim}-d features; the model takes {model.denoiser.feature_dim}-d")

@@ -121,15 +121,25 @@ def train_captions(data_dir: str | Path, split: str = "train") -> list[str]:
     return [c for c in seen if c]
 
 
-def split_lengths(data_dir: str | Path, split: str = "train") -> np.ndarray:
-    """Frames of every motion of a split (rows of its new_joint_vecs files, read from the .npy header)."""
+def split_lengths(data_dir: str | Path, split: str = "train", max_length: int | None = None) -> np.ndarray:
+    """Frames of every motion of a split (rows of its new_joint_vecs files, read from the .npy header);
+    with ``max_length``, only the motions a training run with that max_length keeps (HumanML3D's filter:
+    fewer than max_length + 4 frames)."""
     root = Path(data_dir)
     out = []
     for mid in read_split(root, split):
         path = root / "new_joint_vecs" / f"{mid}.npy"
         if path.is_file():
             out.append(np.load(path, mmap_mode="r").shape[0])
-    return np.asarray(out, dtype=np.int64)
+    lengths = np.asarray(out, dtype=np.int64)
+    return lengths if max_length is None else lengths[lengths < max_length + 4]
+
+
+def trained_max_length(model: MotionDiffusion) -> int:
+    """Frames of the longest motion the model's run trained on: its ``max_length`` (HumanML3D's filter
+    keeps motions under max_length + 4 frames), else its ``max_frames``. Morph's data keeps to it."""
+    limit = model.info.get("train", {}).get("max_length", model.denoiser.max_frames)
+    return min(int(limit), model.denoiser.max_frames)
 
 
 def plan_items(captions: Sequence[str], lengths: np.ndarray, per_caption: int, seed: int,
@@ -261,10 +271,11 @@ def synthesize(
     texts = list(captions) if captions is not None else train_captions(data_dir, cfg.split)
     if not texts:
         raise SynthError(f"{data_dir}: no captions in its {cfg.split} split")
-    lengths = split_lengths(data_dir, cfg.split)
+    trained = trained_max_length(net)
+    lengths = split_lengths(data_dir, cfg.split, trained)  # the lengths the model trained on
     if not len(lengths):
         raise SynthError(f"{data_dir}: no motions in its {cfg.split} split to draw lengths from")
-    max_frames = min(net.denoiser.max_frames, cfg.max_frames or net.denoiser.max_frames)
+    max_frames = min(trained, cfg.max_frames or trained)
     plan = plan_items(texts, lengths, cfg.per_caption, cfg.seed, max_frames)
     projection = cfg.projection()
     plan_sha = hashlib.sha256("\n".join(f"{p.caption}\t{p.frames}" for p in plan).encode()).hexdigest()

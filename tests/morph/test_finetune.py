@@ -78,6 +78,28 @@ def test_nc_licence_carries_through(tiny_model_dir, built_dir, tmp_path) -> None
     assert "NC" in tuned.info["licence_tags"] and tuned.licence_tag == "NC"
 
 
+def test_the_base_runs_loss_and_length_filter_carry_over(built_dir, tmp_path) -> None:
+    """A base trained with the velocity loss on motions under 84 frames is fine-tuned with both: its real
+    and synthetic items are those a run with its ``max_length`` keeps."""
+    import numpy as np
+
+    from physmotion.data.dataset import MotionDataset
+    from physmotion.diffusion.train import train_denoiser
+    from tests.conftest import tiny_config
+
+    base = tmp_path / "base"
+    train_denoiser(tiny_config(built_dir, base, steps=2, d_model=32, layers=1, max_length=80, vel_weight=1.0),
+                   progress=False)  # fmt: skip
+    synth = make_synth(built_dir, base, tmp_path / "synth", n=16)
+    result = finetune(_cfg(base, synth, built_dir, tmp_path / "ft", steps=2), progress=False)
+    train = MotionDiffusion.load(tmp_path / "ft").info["train"]
+    assert train["vel_weight"] == 1.0 and train["max_length"] == 80
+    assert result.real_items == len(MotionDataset(built_dir, "train", crop=64, max_frames=80)) < len(
+        MotionDataset(built_dir, "train", crop=64))
+    lengths = [len(np.load(path)) for _, path, _ in select(synth).training_items()]
+    assert 0 < result.synthetic_items == sum(n < 84 for n in lengths) < len(lengths)
+
+
 def test_resume_continues_exactly(tiny_model_dir, synth_dir, built_dir, tmp_path) -> None:
     finetune(_cfg(tiny_model_dir, synth_dir, built_dir, tmp_path / "whole", steps=6), progress=False)
     finetune(_cfg(tiny_model_dir, synth_dir, built_dir, tmp_path / "split", steps=3), progress=False)
