@@ -682,7 +682,7 @@ def morph_finetune_cmd(
     data: Path = typer.Option(..., help="HumanML3D-layout folder whose train split is mixed in."),
     out: Path = typer.Option(..., "-o", "--out", help="Run folder: model, train_state.pt, loss.csv. Must be "
                              "new or empty, unless --resume continues the run in it."),
-    mix: float | None = typer.Option(None, help="Share of synthetic motions in each batch (default: 0.5)."),
+    mix: float | None = typer.Option(None, help="Share of synthetic motions in each batch (default: 0.25)."),
     lr: float | None = typer.Option(None, help="AdamW learning rate (Morph: 1e-5) (default: 1e-05)."),
     steps: int | None = typer.Option(None, help="Fine-tuning optimiser steps (default: 2000)."),
     batch_size: int | None = typer.Option(None, help="Batch size (default: the model's training run's)."),
@@ -714,7 +714,7 @@ def morph_run_cmd(
     rounds: int = typer.Option(..., help="Rounds of synthesis, selection and fine-tuning."),
     per_caption: int | None = typer.Option(None, "--per-caption", help="Samples per train caption (default: 1)."),
     steps: int | None = typer.Option(None, help="Fine-tuning steps per round (default: 2000)."),
-    mix: float | None = typer.Option(None, help="Share of synthetic motions in each batch (default: 0.5)."),
+    mix: float | None = typer.Option(None, help="Share of synthetic motions in each batch (default: 0.25)."),
     lr: float | None = typer.Option(None, help="Fine-tuning learning rate (default: 1e-05)."),
     seed: int | None = typer.Option(None, help="Random seed of synthesis and fine-tuning (default: 0)."),
     floor: str | None = typer.Option(None, help=FLOOR_HELP),

@@ -78,10 +78,10 @@ def schedule_quotes() -> list[str]:
     ]
 
 
-def morph_quotes(name: str = "morph.json") -> list[str]:
-    """A Morph table (results/morph.json, or results/morph_ilc.json: the chain synthesised under ILC; both
-    by scripts/morph_table.py) as the docs quote it: each figure from the base model through every round."""
-    rows = _load(name)["rows"]
+def morph_quotes() -> list[str]:
+    """The Morph table (results/morph.json, by scripts/morph_table.py) as the docs quote it: each figure from
+    the base model through every round."""
+    rows = _load("morph.json")["rows"]
     models = ["base"] + sorted({r.rsplit(" ", 1)[0] for r in rows if r.startswith("round ")})
     err = {r: rows[r]["phys_err"]["mean"] for r in rows if r != "real"}
 
@@ -149,9 +149,6 @@ QUOTES = {  # which doc quotes which result file
     ("model card", "bench"): bench_quotes,
     ("README", "morph"): morph_quotes,
     ("morph card", "morph"): morph_quotes,
-    ("README", "morph ilc"): lambda: morph_quotes("morph_ilc.json"),
-    ("results", "morph ilc"): lambda: morph_quotes("morph_ilc.json"),
-    ("morph card", "morph ilc"): lambda: morph_quotes("morph_ilc.json"),
     ("README", "dynamic"): dynamic_quotes,
     ("results", "dynamic"): dynamic_quotes,
     ("results", "new prompts"): new_prompts_quotes,
@@ -163,7 +160,7 @@ QUOTES = {  # which doc quotes which result file
 def _section(text: str, source: str) -> str:
     """The paragraph(s) of a doc that quote ``source``: those naming its file or command."""
     files = {"evaluate": "evaluate_default", "bench": "physdiff_quality", "schedule": "schedule_study",
-             "morph": "results/morph.md", "morph ilc": "results/morph_ilc.md",
+             "morph": "results/morph.md",
              "dynamic": "projection_dynamic",
              "new prompts": "new_prompts_default", "biomodiffuse": "results/biomodiffuse"}
     marker = files[source]

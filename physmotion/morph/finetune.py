@@ -56,7 +56,9 @@ class FinetuneConfig:
     synth: str
     data: str
     out: str
-    mix: float = 0.5  # share of synthetic items in each batch; the rest from the real train split
+    # Share of synthetic items in each batch; the rest from the real train split. 0.25 kept FID within the
+    # base's PhysDiff interval where 0.5 did not (docs/decisions.md: "Morph from the velocity-loss default").
+    mix: float = 0.25
     lr: float = 1e-5  # Morph Sec. 4 "Training Setup": 1e-5 (the original runs used 2e-4 here)
     steps: int = 2000
     batch_size: int | None = None
