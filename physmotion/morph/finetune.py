@@ -37,11 +37,11 @@ from physmotion.training import seeded_generator
 SKELETON = "smpl22"
 # Training settings taken from the base model's own run where FinetuneConfig leaves them unset (Sec. 3.3:
 # the original setup); the learning rate is the one setting Morph changes.
-# The base's loss terms (vel_weight) and its length filter (max_length) belong to that setup too: without them a
-# fine-tune of the default model trains on windows and a loss it never saw (docs/decisions.md: "Morph
-# fine-tuning keeps the base run's loss and length filter").
-INHERITED = ("batch_size", "crop", "max_length", "random_crop", "warmup", "weight_decay", "ema_decay", "grad_clip",
-             "text_drop", "vel_weight", "log_every")  # fmt: skip
+# The base's loss terms (vel_weight) and length filter (max_length) belong to that setup too: without them
+# a fine-tune of the default trains on windows and a loss it never saw (docs/decisions.md: "Morph from
+# the velocity-loss default").
+INHERITED = ("batch_size", "crop", "max_length", "random_crop", "warmup", "weight_decay", "ema_decay",
+             "grad_clip", "text_drop", "vel_weight", "log_every")  # fmt: skip
 
 
 class FinetuneError(PhysmotionError):
