@@ -61,6 +61,12 @@ def read_split(root: str | Path, split: str) -> list[str]:
     return [line.strip() for line in path.read_text().splitlines() if line.strip()]
 
 
+def length_limit(max_frames: int) -> int:
+    """HumanML3D's length filter: a run with max length ``max_frames`` keeps motions of fewer frames than
+    this (fewer than 200 for 196)."""
+    return max_frames + 4
+
+
 def load_items(
     root: str | Path,
     split: str,
@@ -74,7 +80,7 @@ def load_items(
     from physmotion.data.build import load_activations  # here: build imports MuJoCo, which few callers need
 
     root = Path(root)
-    limit = max_frames + 4  # HumanML3D keeps motions of fewer than 200 frames for max length 196
+    limit = length_limit(max_frames)
     items: list[MotionItem] = []
     for mid in read_split(root, split):
         vec_path, text_path = root / "new_joint_vecs" / f"{mid}.npy", root / "texts" / f"{mid}.txt"

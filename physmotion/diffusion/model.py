@@ -39,6 +39,13 @@ class MotionDiffusion:
         return "NC" if "NC" in self.info.get("licence_tags", []) else "open"
 
     @property
+    def trained_max_length(self) -> int:
+        """The length filter of the model's training run (``train --max-length``; motions under it + 4
+        frames were kept), else its ``max_frames``. Morph's synthetic and real data keep to it."""
+        limit = self.info.get("train", {}).get("max_length", self.denoiser.max_frames)
+        return min(int(limit), self.denoiser.max_frames)
+
+    @property
     def floor(self) -> str:
         """The floor convention its samples stand in (:data:`~physmotion.conventions.FLOORS`): HumanML3D's
         lowest joint on y = 0, unless the model was fine-tuned on motions with the soles on the floor."""

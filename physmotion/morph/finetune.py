@@ -24,24 +24,23 @@ import torch
 
 from physmotion.checkpoint import CONFIG_FILE, WEIGHTS_FILE, weights_sha256
 from physmotion.conventions import FLOOR_SURFACE, FLOORS, MAX_FRAMES, MIN_FRAMES
-from physmotion.data.dataset import MotionDataset, MotionItem, collate
+from physmotion.data.dataset import MotionDataset, MotionItem, collate, length_limit
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.train import TrainConfig, TrainResult, masked_mse, train_denoiser
 from physmotion.errors import PhysmotionError
 from physmotion.features.normalize import Normalizer
 from physmotion.morph.floor import on_surface, selected_on_surface
 from physmotion.morph.selection import TAU, Selection, read_synth_info, select
-from physmotion.morph.synth import trained_max_length
 from physmotion.training import seeded_generator
 
 SKELETON = "smpl22"
 # Training settings taken from the base model's own run where FinetuneConfig leaves them unset (Sec. 3.3:
 # the original setup); the learning rate is the one setting Morph changes.
-# The base's loss terms (vel_weight) and length filter (max_length) belong to that setup too: without them
-# a fine-tune of the default trains on windows and a loss it never saw (docs/decisions.md: "Morph from
-# the velocity-loss default").
-INHERITED = ("batch_size", "crop", "max_length", "random_crop", "warmup", "weight_decay", "ema_decay",
-             "grad_clip", "text_drop", "vel_weight", "log_every")  # fmt: skip
+# The base's loss terms (vel_weight) belong to that setup too, and so does its length filter
+# (MotionDiffusion.trained_max_length, set in _prepare): without them a fine-tune of the default trains on
+# windows and a loss it never saw (docs/decisions.md: "Morph from the velocity-loss default").
+INHERITED = ("batch_size", "crop", "random_crop", "warmup", "weight_decay", "ema_decay", "grad_clip",
+             "text_drop", "vel_weight", "log_every")  # fmt: skip
 
 
 class FinetuneError(PhysmotionError):
@@ -178,7 +177,7 @@ def selected_items(selection: Selection, feature_dim: int, max_frames: int = MAX
             raise FinetuneError(f"{path}: unreadable synthetic motion ({exc})") from None
         if feats.ndim != 2 or feats.shape[1] != feature_dim or not np.all(np.isfinite(feats)):
             raise FinetuneError(f"{path}: expected finite (T, {feature_dim}) features, got {feats.shape}")
-        if MIN_FRAMES <= len(feats) < max_frames + 4:  # load_items' HumanML3D filter
+        if MIN_FRAMES <= len(feats) < length_limit(max_frames):  # load_items' HumanML3D filter
             items.append(MotionItem(sid, feats, [caption]))
     if not items:
         raise FinetuneError("the selection is empty: no synthetic motion within the model's length range")
@@ -203,13 +202,13 @@ def _prepare(config: FinetuneConfig, progress: bool = False
     model = MotionDiffusion.load(model_dir)
     check_synth(config.synth, model_dir, model)
     selection = select(config.synth, config.tau)
-    base_train = model.info.get("train", {})
-    max_length = trained_max_length(model)
+    max_length = model.trained_max_length
     items = selected_items(selection, model.denoiser.feature_dim, max_length)
     if config.floor == FLOOR_SURFACE:
         refined = {s.id: s.features_path.parent.parent / "new_joints" / s.features_path.name
                    for s in selection.items if s.source == "refined"}  # fmt: skip
         items = selected_on_surface(items, refined, progress)
+    base_train = model.info.get("train", {})
     given = {"batch_size": config.batch_size, "warmup": config.warmup}
     train = {k: base_train[k] for k in INHERITED if k in base_train} | {k: v for k, v in given.items() if v is not None}
     train["crop"] = min(train.get("crop", model.denoiser.max_frames), model.denoiser.max_frames)

@@ -33,7 +33,7 @@ import torch
 
 from physmotion.checkpoint import WEIGHTS_FILE, weights_sha256
 from physmotion.conventions import FPS, MIN_FRAMES
-from physmotion.data.dataset import read_captions, read_split
+from physmotion.data.dataset import length_limit, read_captions, read_split
 from physmotion.diffusion.model import DEFAULT_MODEL_DIR, MotionDiffusion
 from physmotion.diffusion.samplers import SamplerConfig, sample
 from physmotion.errors import PhysmotionError
@@ -132,14 +132,7 @@ def split_lengths(data_dir: str | Path, split: str = "train", max_length: int | 
         if path.is_file():
             out.append(np.load(path, mmap_mode="r").shape[0])
     lengths = np.asarray(out, dtype=np.int64)
-    return lengths if max_length is None else lengths[lengths < max_length + 4]
-
-
-def trained_max_length(model: MotionDiffusion) -> int:
-    """Frames of the longest motion the model's run trained on: its ``max_length`` (HumanML3D's filter
-    keeps motions under max_length + 4 frames), else its ``max_frames``. Morph's data keeps to it."""
-    limit = model.info.get("train", {}).get("max_length", model.denoiser.max_frames)
-    return min(int(limit), model.denoiser.max_frames)
+    return lengths if max_length is None else lengths[lengths < length_limit(max_length)]
 
 
 def plan_items(captions: Sequence[str], lengths: np.ndarray, per_caption: int, seed: int,
@@ -271,7 +264,7 @@ def synthesize(
     texts = list(captions) if captions is not None else train_captions(data_dir, cfg.split)
     if not texts:
         raise SynthError(f"{data_dir}: no captions in its {cfg.split} split")
-    trained = trained_max_length(net)
+    trained = net.trained_max_length
     lengths = split_lengths(data_dir, cfg.split, trained)  # the lengths the model trained on
     if not len(lengths):
         raise SynthError(f"{data_dir}: no motions in its {cfg.split} split to draw lengths from")

@@ -16,7 +16,7 @@ from physmotion.errors import PhysmotionError
 from physmotion.features.humanml3d import extract_features
 from physmotion.morph.preprocess import correct_tilt, tilt_angle
 from physmotion.morph.selection import INDEX_FIELDS, select
-from physmotion.morph.synth import SUBDIRS, SynthConfig, split_lengths, synthesize, trained_max_length
+from physmotion.morph.synth import SUBDIRS, SynthConfig, split_lengths, synthesize
 
 CAPTIONS = ["a person walks forward", "a person jumps", "a person sits on a chair", "a person waves"]
 
@@ -134,7 +134,7 @@ def test_other_settings_are_refused(model, built_dir: Path, full: Path, tmp_path
 
 def test_lengths_are_drawn_from_the_motions_the_model_trained_on(model, built_dir: Path) -> None:
     # The shipped model's run kept motions under 124 frames (--max-length 120); the split holds longer ones.
-    limit = trained_max_length(model)
+    limit = model.trained_max_length
     assert limit == model.info["train"]["max_length"] == 120
     every, kept = split_lengths(built_dir), split_lengths(built_dir, max_length=limit)
     assert kept.max() < 124 <= every.max() and len(kept) == int((every < 124).sum()) > 0
