@@ -675,6 +675,9 @@ def morph_select_cmd(
                   highlight=False)  # fmt: skip
 
 
+_MIX_HELP = "Share of synthetic motions in each batch (default: 0.25; 0: the control on real motions alone)."
+
+
 @morph_app.command("finetune")
 def morph_finetune_cmd(
     model: Path = typer.Option(..., help="Model folder to fine-tune (the one that made --synth)."),
@@ -682,7 +685,7 @@ def morph_finetune_cmd(
     data: Path = typer.Option(..., help="HumanML3D-layout folder whose train split is mixed in."),
     out: Path = typer.Option(..., "-o", "--out", help="Run folder: model, train_state.pt, loss.csv. Must be "
                              "new or empty, unless --resume continues the run in it."),
-    mix: float | None = typer.Option(None, help="Share of synthetic motions in each batch (default: 0.25)."),
+    mix: float | None = typer.Option(None, help=_MIX_HELP),
     lr: float | None = typer.Option(None, help="AdamW learning rate (Morph: 1e-5) (default: 1e-05)."),
     steps: int | None = typer.Option(None, help="Fine-tuning optimiser steps (default: 2000)."),
     batch_size: int | None = typer.Option(None, help="Batch size (default: the model's training run's)."),
@@ -714,7 +717,7 @@ def morph_run_cmd(
     rounds: int = typer.Option(..., help="Rounds of synthesis, selection and fine-tuning."),
     per_caption: int | None = typer.Option(None, "--per-caption", help="Samples per train caption (default: 1)."),
     steps: int | None = typer.Option(None, help="Fine-tuning steps per round (default: 2000)."),
-    mix: float | None = typer.Option(None, help="Share of synthetic motions in each batch (default: 0.25)."),
+    mix: float | None = typer.Option(None, help=_MIX_HELP),
     lr: float | None = typer.Option(None, help="Fine-tuning learning rate (default: 1e-05)."),
     seed: int | None = typer.Option(None, help="Random seed of synthesis and fine-tuning (default: 0)."),
     floor: str | None = typer.Option(None, help=FLOOR_HELP),

@@ -6,6 +6,8 @@ the learning rate to 1e-5"; our model trained at 2e-4), on the items that Morph'
 (:func:`physmotion.morph.selection.select`) keeps from a synthetic folder: the refined motion where P
 imitated it, else the generated input. Each batch holds a fixed share ``mix`` of synthetic items, the
 rest drawn from the real train split, so the model does not drift from the data it was trained on.
+``mix`` 0 is the control: the same fine-tune (loss, steps, floor) on the real split alone, to tell what
+the synthetic items add to what continued training on the re-floored real motions gives.
 
 Features are normalised with the *model's* Mean/Std: the network's input space must not move under it.
 By default every motion stands with the humanoid's soles on the floor (:mod:`physmotion.morph.floor`), so
@@ -194,8 +196,9 @@ def _prepare(config: FinetuneConfig, progress: bool = False
     """Every check and load of a run, before anything is written."""
     if config.floor not in FLOORS:
         raise FinetuneError(f"--floor must be one of {', '.join(FLOORS)}, got {config.floor!r}")
-    if not 0.0 < config.mix <= 1.0:
-        raise FinetuneError(f"--mix must be in (0, 1] (the synthetic share of a batch), got {config.mix}")
+    if not 0.0 <= config.mix <= 1.0:
+        raise FinetuneError(f"--mix must be in [0, 1] (the synthetic share of a batch; 0: the control "
+                            f"on real motions alone), got {config.mix}")
     if not config.lr > 0 or config.steps < 1:
         raise FinetuneError(f"--lr must be positive and --steps at least 1, got {config.lr} and {config.steps}")
     model_dir = check_model_dir(config.model)

@@ -62,6 +62,10 @@ def test_each_batch_holds_the_synthetic_share(tiny_model, synth_dir, built_dir) 
         _, idx = mixed.batch_indices(8, 0, step)
         assert len(idx) == 8 and sum(i < len(synth) for i in idx) == 2
         assert mixed.batch_indices(8, 0, step)[1] == idx  # a function of (seed, step): resumable
+    control = MixedDataset(synth, real, 0.0)  # mix 0: the real-only control
+    for step in range(5):
+        _, idx = control.batch_indices(8, 0, step)
+        assert len(idx) == 8 and all(i >= len(synth) for i in idx)
 
 
 def test_nc_licence_carries_through(tiny_model_dir, built_dir, tmp_path) -> None:
@@ -130,6 +134,8 @@ def test_bad_inputs_are_one_line_errors_and_write_nothing(tiny_model_dir, synth_
     shutil.copy(tiny_model_dir / "model.safetensors", no_config)
     with pytest.raises(FinetuneError, match="config.json"):
         finetune(_cfg(no_config, synth_dir, built_dir, out), progress=False)
+    with pytest.raises(FinetuneError, match=r"--mix must be in \[0, 1\]"):
+        finetune(_cfg(tiny_model_dir, synth_dir, built_dir, out, mix=1.5), progress=False)
     assert not out.exists()
 
 
