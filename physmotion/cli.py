@@ -703,9 +703,11 @@ def morph_finetune_cmd(
                 steps=steps, batch_size=batch_size, tau=tau, seed=seed, floor=floor)  # fmt: skip
     result = finetune(cfg, resume=resume, progress=sys.stderr.isatty())
     c, last = result.selection.counts, result.train.losses[-1][1] if result.train.losses else float("nan")
-    console.print(f"fine-tuned to step {result.train.step} on {result.synthetic_items} synthetic ({c['refined']} "
-                  f"refined, {c['input']} input, IFR {result.selection.ifr:.3f}) and {result.real_items} real "
-                  f"motions, last loss {last:.4f}; model in {out}", highlight=False)  # fmt: skip
+    data = (f"{result.synthetic_items} synthetic ({c['refined']} refined, {c['input']} input, IFR "
+            f"{result.selection.ifr:.3f}) and {result.real_items} real motions" if cfg.mix > 0
+            else f"{result.real_items} real motions alone (--mix 0: the control)")  # fmt: skip
+    console.print(f"fine-tuned to step {result.train.step} on {data}, last loss {last:.4f}; model in {out}",
+                  highlight=False)
 
 
 @morph_app.command("run")

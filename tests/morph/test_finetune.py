@@ -147,6 +147,9 @@ def test_cli_finetune(tiny_model_dir, synth_dir, built_dir, tmp_path) -> None:
     res = run(*common, "--steps", "2")
     assert res.returncode == 0, res.stderr
     assert "fine-tuned to step 2" in res.stdout and (out / "model.safetensors").is_file()
+    assert "synthetic" in res.stdout
+    res = run(*common[:-1], tmp_path / "control", "--steps", "1", "--mix", "0")
+    assert res.returncode == 0 and "real motions alone (--mix 0: the control)" in res.stdout, res.stderr
     weights = (out / "model.safetensors").read_bytes()
     res = run(*common, "--steps", "3")
     assert res.returncode == 1 and "--resume" in res.stderr and "Traceback" not in res.stderr
