@@ -9,6 +9,9 @@ each round's synthetic-data figures (items, refined kept, IFR) from ``<run>/roun
 Each (model, mode) table is kept in ``<out>.parts/`` and reused by a re-run with the same settings and
 the same weights (sha256). The base model is the one the run recorded; a folder whose weights changed
 since (the shipped default after a new release) is refused: pass the run's base with ``--base``.
+With ``--control DIR`` (repeatable) a model fine-tuned by `morph finetune --mix 0` (the same fine-tune
+on the real train split alone) adds rows "control <steps> steps none" and "... none+floor": what the
+synthetic items add beyond continued training on the re-floored real motions.
 It is a script rather than a command because it is a study over several models.
 """
 
@@ -29,6 +32,7 @@ from physmotion.physics_mode import parse_modes
 
 BASE_MODES = "none,none+floor,morph,physdiff:end:4,space:1"
 ROUND_MODES = "none,none+floor,morph"
+CONTROL_MODES = "none,none+floor"
 
 
 def _rounds(run: Path) -> list[tuple[str, Path]]:
@@ -51,9 +55,18 @@ def _base(run: Path, base: str | None) -> Path:
     return folder
 
 
+def _control(folder: Path) -> tuple[str, Path]:
+    """("control <steps> steps", folder) of a model fine-tuned with ``morph finetune --mix 0``."""
+    morph = MotionDiffusion.load(folder).info.get("morph", {})
+    if morph.get("mix") != 0:
+        raise PhysmotionError(f"{folder} is not a `morph finetune --mix 0` model (mix {morph.get('mix')})")
+    return f"control {morph['steps']} steps", folder
+
+
 def morph_table(data: str, run: Path, base: str | None, cfg: EvaluateConfig, evaluator: Evaluator,
-                parts: Path) -> EvalTable:  # fmt: skip
-    """One EvalTable over the base model (BASE_MODES) and every round of ``run`` (ROUND_MODES).
+                parts: Path, controls: list[Path] = ()) -> EvalTable:  # fmt: skip
+    """One EvalTable over the base model (BASE_MODES), every round of ``run`` (ROUND_MODES) and each
+    real-only control (CONTROL_MODES).
 
     Each (model, mode) table is kept in ``parts/<model>__<mode>.json`` and reused by a re-run with the same
     settings: an interrupted study loses at most one evaluation, and a changed mode is re-run alone
@@ -63,6 +76,7 @@ def morph_table(data: str, run: Path, base: str | None, cfg: EvaluateConfig, eva
     rows: dict = {}
     meta: dict = {"models": {}, "rounds": {}}
     models = [("base", _base(run, base), BASE_MODES)] + [(n, f, ROUND_MODES) for n, f in _rounds(run)]
+    models += [(*_control(Path(c)), CONTROL_MODES) for c in controls]
     for name, folder, modes in models:
         net, sha = None, weights_sha256(folder)
         for mode in (str(m) for m in parse_modes(modes)):
@@ -98,11 +112,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--split", default="test")
     parser.add_argument("--repeats", type=int, default=EvaluateConfig.repeats)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--control", action="append", default=[], type=Path,
+                        help="a model made by `morph finetune --mix 0` (repeatable)")
     args = parser.parse_args(argv)
     try:
         cfg = EvaluateConfig(split=args.split, repeats=args.repeats, seed=args.seed)
         parts = Path(f"{args.out}.parts")
-        table = morph_table(args.data, args.run, args.base, cfg, Evaluator.load(args.evaluator), parts)
+        table = morph_table(args.data, args.run, args.base, cfg, Evaluator.load(args.evaluator), parts,
+                            args.control)
         paths = table.write(args.out)
     except PhysmotionError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -19,7 +19,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -143,7 +143,8 @@ def run_rounds(
         record["rounds"] = [done[i] for i in sorted(done)]
         write_table(out, record)
         current = rdir / "model"
-    return [RoundRow(**done[i]) for i in sorted(done) if i <= rounds]
+    names = {f.name for f in fields(RoundRow)}  # a record may carry more (a note written by hand): kept, not read
+    return [RoundRow(**{k: v for k, v in done[i].items() if k in names}) for i in sorted(done) if i <= rounds]
 
 
 def _settings(config) -> dict:

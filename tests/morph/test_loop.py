@@ -35,10 +35,14 @@ def test_rounds_chain_weights_and_resume_by_round(tiny_model_dir: Path, built_di
     table = json.loads((out / "rounds.json").read_text())
     assert [r["round"] for r in table["rounds"]] == [1, 2]
     assert "IFR" in (out / "rounds.md").read_text()
-    # Finished rounds are skipped; a third round starts from round 2's weights.
+    # Finished rounds are skipped; a third round starts from round 2's weights. A note written by hand into
+    # the record is kept and does not stop the run.
+    table["rounds"][0]["note"] = "made by hand"
+    (out / "rounds.json").write_text(json.dumps(table))
     calls.clear()
     rows = run_rounds(tiny_model_dir, built_dir, out, 3, None, ft, progress=False, synthesize_fn=fake_synthesize)
     assert calls == [out / "round_2" / "model"] and [r.round for r in rows] == [1, 2, 3]
+    assert json.loads((out / "rounds.json").read_text())["rounds"][0]["note"] == "made by hand"
     # Another base model's run folder is refused.
     other = tmp_path / "other_model"
     other.mkdir()
