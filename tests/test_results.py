@@ -95,7 +95,8 @@ def morph_quotes() -> list[str]:
         f"morph {chain('morph', err, '.1f')} mm",
         f"FID {chain('none', fid, '.3f')}",
         f"PhysDiff {err['base ' + PHYSDIFF]:.1f} mm",
-    ]
+    ] + [f"{name}: none {err[name + ' none']:.1f} mm, FID {fid[name + ' none']:.3f}"
+         for name in sorted({r.rsplit(" ", 1)[0] for r in rows if r.startswith("control ")})]
 
 
 def dynamic_quotes() -> list[str]:
