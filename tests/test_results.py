@@ -82,7 +82,11 @@ def morph_quotes() -> list[str]:
     """The Morph table (results/morph.json, by scripts/morph_table.py) as the docs quote it: each figure from
     the base model through every round."""
     rows = _load("morph.json")["rows"]
-    models = ["base"] + sorted({r.rsplit(" ", 1)[0] for r in rows if r.startswith("round ")})
+
+    def models_named(prefix: str) -> list[str]:  # "round 2 none" -> "round 2"
+        return sorted({r.rsplit(" ", 1)[0] for r in rows if r.startswith(prefix)})
+
+    models = ["base"] + models_named("round ")
     err = {r: rows[r]["phys_err"]["mean"] for r in rows if r != "real"}
 
     def chain(mode: str, values: dict, fmt: str) -> str:
@@ -96,7 +100,7 @@ def morph_quotes() -> list[str]:
         f"FID {chain('none', fid, '.3f')}",
         f"PhysDiff {err['base ' + PHYSDIFF]:.1f} mm",
     ] + [f"{name}: none {err[name + ' none']:.1f} mm, FID {fid[name + ' none']:.3f}"
-         for name in sorted({r.rsplit(" ", 1)[0] for r in rows if r.startswith("control ")})]
+         for name in models_named("control ")]
 
 
 def dynamic_quotes() -> list[str]:

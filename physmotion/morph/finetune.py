@@ -206,8 +206,9 @@ def _prepare(config: FinetuneConfig, progress: bool = False
     check_synth(config.synth, model_dir, model)
     selection = select(config.synth, config.tau)
     max_length = model.trained_max_length
-    items = selected_items(selection, model.denoiser.feature_dim, max_length)
-    if config.floor == FLOOR_SURFACE:
+    # The control (mix 0) trains on no synthetic item: none is read or grounded.
+    items = selected_items(selection, model.denoiser.feature_dim, max_length) if config.mix > 0 else []
+    if config.floor == FLOOR_SURFACE and items:
         refined = {s.id: s.features_path.parent.parent / "new_joints" / s.features_path.name
                    for s in selection.items if s.source == "refined"}  # fmt: skip
         items = selected_on_surface(items, refined, progress)
