@@ -1,9 +1,10 @@
 """Morph's synthetic data throughput: synthetic motions refined per second, and where the time goes.
 
 Usage: python bench/morph.py [--model DIR] [--data data_build/mocap] [--captions 16] [--per-caption 1]
-    [--workers 0] [--steps 50]
+    [--workers 0] [--steps 50] [--ilc 0] [--run RUN]
 Runs :func:`physmotion.morph.synth.synthesize` on the first ``--captions`` distinct train captions
-(lengths drawn from the train split, 50 DDIM steps, P with Morph's selection settings) into a temporary
+(lengths drawn from the train split, 50 DDIM steps, P with Morph's selection settings, ``--ilc`` passes of
+iterative learning control as `morph run --ilc`) into a temporary
 folder, and prints one table from its :class:`SynthReport`: items per second, the share of wall time in
 sampling (the denoiser) and in P (pre-processing, projection, features and writing, waited for).
 The model is loaded before timing; the first batch pays the text encoder's and the worker pool's start.
@@ -37,18 +38,19 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=0)
     parser.add_argument("--steps", type=int, default=50)
     parser.add_argument("--batch-size", type=int, default=16)
+    parser.add_argument("--ilc", type=int, default=0, help="P's iterative learning control passes (morph run --ilc)")
     parser.add_argument("--run", type=Path, default=None, help="a finished `morph run` folder")
     args = parser.parse_args()
 
     model = MotionDiffusion.load(args.model)
     captions = train_captions(args.data)[: args.captions]
     cfg = SynthConfig(per_caption=args.per_caption, workers=args.workers, batch_size=args.batch_size,
-                      sampler=SamplerConfig(steps=args.steps))  # fmt: skip
+                      sampler=SamplerConfig(steps=args.steps), ilc_passes=args.ilc)  # fmt: skip
     with tempfile.TemporaryDirectory() as tmp:
         report = synthesize(args.model, args.data, Path(tmp) / "synth", cfg, captions=captions, model=model)
 
     table = Table(title=f"Morph synthetic data: {report.done} motions ({len(captions)} captions x "
-                  f"{args.per_caption}), {args.steps} DDIM steps, batch {args.batch_size}")  # fmt: skip
+                  f"{args.per_caption}), {args.steps} DDIM steps, batch {args.batch_size}, ILC {args.ilc}")  # fmt: skip
     for col in ("stage", "seconds", "share of wall", "motions / s"):
         table.add_column(col, justify="right" if col != "stage" else "left")
     wall = report.seconds or float("nan")

@@ -126,10 +126,14 @@ def dynamic_quotes() -> list[str]:
 
 def new_prompts_quotes() -> list[str]:
     """The unseen-prompt bench (results/new_prompts_default.json): PhysDiff against none per category, and
-    the share of its projections in which the humanoid fell."""
+    the share of its projections in which the humanoid fell, both means over the seeds (as the bench prints)."""
     runs = _load("new_prompts_default.json")["runs"]
-    return [f"{cat} {_change(rows[0][PHYSDIFF]['phys_err'], rows[0]['none']['phys_err'])} "
-            f"({100 * (1 - rows[0][PHYSDIFF]['tracked']):.0f} % fell)" for cat, rows in runs.items()]
+
+    def mean(rows: list[dict], mode: str, key: str) -> float:
+        return sum(r[mode][key] for r in rows) / len(rows)
+
+    return [f"{cat} {_change(mean(rows, PHYSDIFF, 'phys_err'), mean(rows, 'none', 'phys_err'))} "
+            f"({100 * (1 - mean(rows, PHYSDIFF, 'tracked')):.0f} % fell)" for cat, rows in runs.items()]
 
 
 def biomodiffuse_quotes() -> list[str]:
