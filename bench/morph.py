@@ -38,7 +38,8 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=0)
     parser.add_argument("--steps", type=int, default=50)
     parser.add_argument("--batch-size", type=int, default=16)
-    parser.add_argument("--ilc", type=int, default=0, help="P's iterative learning control passes (morph run --ilc)")
+    parser.add_argument("--ilc", type=int, default=0,
+                        help="P's iterative learning control passes, as `morph run --ilc`")
     parser.add_argument("--run", type=Path, default=None, help="a finished `morph run` folder")
     args = parser.parse_args()
 
@@ -50,7 +51,8 @@ def main() -> None:
         report = synthesize(args.model, args.data, Path(tmp) / "synth", cfg, captions=captions, model=model)
 
     table = Table(title=f"Morph synthetic data: {report.done} motions ({len(captions)} captions x "
-                  f"{args.per_caption}), {args.steps} DDIM steps, batch {args.batch_size}, ILC {args.ilc}")  # fmt: skip
+                  f"{args.per_caption}), {args.steps} DDIM steps, batch {args.batch_size}, "
+                  f"ILC {args.ilc}")  # fmt: skip
     for col in ("stage", "seconds", "share of wall", "motions / s"):
         table.add_column(col, justify="right" if col != "stage" else "left")
     wall = report.seconds or float("nan")
