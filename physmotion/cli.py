@@ -675,7 +675,7 @@ def morph_select_cmd(
                   highlight=False)  # fmt: skip
 
 
-_MIX_HELP = "Share of synthetic motions in each batch; 0: the control on real motions alone (default: 0.25)."
+_MIX_HELP = "Share of synthetic motions in each batch; 0: the control on real motions alone (default: 0.1)."
 
 
 @morph_app.command("finetune")

@@ -136,6 +136,23 @@ def new_prompts_quotes() -> list[str]:
             f"({100 * (1 - mean(rows, PHYSDIFF, 'tracked')):.0f} % fell)" for cat, rows in runs.items()]
 
 
+def new_prompts_morph_quotes() -> list[str]:
+    """The Morph-tuned model against the default on the unseen prompts (results/new_prompts_morph.json):
+    each mode's Phys-Err, mean over categories and seeds, and plain sampling's change per seed."""
+    default, morph = _load("new_prompts_default.json")["runs"], _load("new_prompts_morph.json")["runs"]
+
+    def err(runs: dict, mode: str, seed: int | None = None) -> float:
+        return float(np.mean([r[mode]["phys_err"] for rows in runs.values()
+                              for s, r in enumerate(rows) if seed in (None, s)]))  # fmt: skip
+
+    seeds = range(len(next(iter(default.values()))))
+    per_seed = " / ".join(f"{100 * (err(morph, 'none', s) / err(default, 'none', s) - 1):.0f}" for s in seeds)
+    quotes = [f"none {err(default, 'none'):.1f} -> {err(morph, 'none'):.1f} mm "
+              f"({_change(err(morph, 'none'), err(default, 'none'))}; per seed {per_seed} %)"]
+    names = {"none+floor": "none+floor", "post:1": "post:1", PHYSDIFF: "PhysDiff", "morph": "morph"}
+    return quotes + [f"{name} {err(default, mode):.1f} -> {err(morph, mode):.1f}" for mode, name in names.items()]
+
+
 def biomodiffuse_quotes() -> list[str]:
     """BioMoDiffuse's ablation (results/biomodiffuse.json): the baseline and the full model, and Table 6."""
     result = _load("biomodiffuse.json")
@@ -161,6 +178,8 @@ QUOTES = {  # which doc quotes which result file
     ("README", "dynamic"): dynamic_quotes,
     ("results", "dynamic"): dynamic_quotes,
     ("results", "new prompts"): new_prompts_quotes,
+    ("results", "new prompts morph"): new_prompts_morph_quotes,
+    ("morph card", "new prompts morph"): new_prompts_morph_quotes,
     ("README", "biomodiffuse"): biomodiffuse_quotes,
     ("results", "biomodiffuse"): biomodiffuse_quotes,
 }
@@ -171,7 +190,8 @@ def _section(text: str, source: str) -> str:
     files = {"evaluate": "evaluate_default", "bench": "physdiff_quality", "schedule": "schedule_study",
              "morph": "results/morph.md",
              "dynamic": "projection_dynamic",
-             "new prompts": "new_prompts_default", "biomodiffuse": "results/biomodiffuse"}
+             "new prompts": "new_prompts_default", "new prompts morph": "new_prompts_morph",
+             "biomodiffuse": "results/biomodiffuse"}
     marker = files[source]
     return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
 

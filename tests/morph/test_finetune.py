@@ -44,7 +44,7 @@ def test_finetuning_lowers_the_loss_on_the_synthetic_set(tiny_model_dir, synth_d
     assert after < 0.9 * before, (before, after)
     morph = tuned.info["morph"]
     assert morph["rounds"] == 1 and morph["selected"] == {"refined": 6, "input": 2} and morph["ifr"] == 0.25
-    assert morph["mix"] == 0.25 and morph["lr"] == 1e-3 and tuned.info["steps"] == 20 == result.train.step
+    assert morph["mix"] == 0.1 and morph["lr"] == 1e-3 and tuned.info["steps"] == 20 == result.train.step
     assert morph["base_model"] == str(tiny_model_dir) and morph["synth"] == str(synth_dir)
     assert result.real_items > 0 and result.synthetic_items == 8
     # The model's normaliser is kept, never recomputed from the mix.

@@ -16,9 +16,9 @@ MORPH_DIR = Path(DEFAULT_MODEL_DIR).parent / "morph"
 def test_morph_model_card_facts_and_generation() -> None:
     model = MotionDiffusion.load(MORPH_DIR)
     info = model.info["morph"]
-    assert info["rounds"] == 2 and info["selected"] == {"refined": 378, "input": 39}  # round 2 ships
+    assert info["rounds"] == 2 and info["selected"] == {"refined": 392, "input": 25}  # round 2 ships
     first = model.info["base_info"]["morph"]  # round 1, fine-tuned from today's default
-    assert info["mix"] == first["mix"] == 0.25
+    assert info["mix"] == first["mix"] == 0.1
     assert first["base_model_sha256"] == weights_sha256(DEFAULT_MODEL_DIR)
     assert model.floor == FLOOR_SURFACE  # fine-tuned with the soles on the floor
     assert model.licence_tag == "NC" and "NC" in model.info["licence_tags"]  # the base's NC data carries through
