@@ -7,8 +7,9 @@ and 16 motions (one caption each, from the physics prompt set); 50 DDIM steps, C
 text encoder are loaded and warmed up once before timing; each time is the best of ``--repeats`` rounds.
 PhysDiff reports 2.5x none at batch 1.
 
-With ``--morph DIR`` (a Morph-tuned model) two rows time it in modes none and morph, beside the base
-model's: Morph's claim is plain sampling at the base model's cost, and one P instead of PhysDiff's four.
+With ``--morph DIR`` (a Morph-tuned model) three rows time it in modes none, post:1 (one P, the sampling
+preset's reset instead of Morph's selection) and morph, beside the base model's: Morph's claim is plain
+sampling at the base model's cost, and one P instead of PhysDiff's four.
 
 With ``--biomo DIR`` (a BioMoDiffuse model, e.g. ``runs/biomo_ablation/biomo`` from
 ``scripts/biomodiffuse_table.py``) a row times it without projection at its own sampler (SDE DPM-Solver++,
@@ -42,7 +43,7 @@ from physmotion.generate import GenerateConfig, generate
 MODES = ("none", "morph", "post:4", "physdiff:end:4,space:1")  # morph: Morph's inference, one P
 PHYSDIFF = MODES[-1]
 BIOMO = "BioMoDiffuse none (dpmpp-sde 10 steps)"
-MORPH_MODES = ("none", "morph")  # a Morph-tuned model: plain sampling and Morph's inference
+MORPH_MODES = ("none", "post:1", "morph")  # a Morph-tuned model: plain sampling and one P, two ways
 
 
 @contextmanager
@@ -71,7 +72,8 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=2, help="rounds over all modes; the best time counts")
     parser.add_argument("--biomo", default=None, help="a BioMoDiffuse model folder to time beside the others")
     parser.add_argument("--morph", default=None,
-                        help="a Morph-tuned model folder (physmotion/models/morph): times its none and morph")
+                        help="a Morph-tuned model folder (physmotion/models/morph): times its none, post:1 "
+                             "and morph")
     args = parser.parse_args()
     model = MotionDiffusion.load(args.model)
     base = GenerateConfig(seconds=args.seconds)

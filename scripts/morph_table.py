@@ -30,8 +30,9 @@ from physmotion.eval.table import REAL, EvalTable, EvaluateConfig, evaluate
 from physmotion.morph.loop import read_rounds
 from physmotion.physics_mode import parse_modes
 
-BASE_MODES = "none,none+floor,morph,physdiff:end:4,space:1"
-ROUND_MODES = "none,none+floor,morph"
+# post:1 is one P with the sampling preset's reset instead of Morph's selection: the cheapest projection
+# after sampling, and what one P can do for a tuned model (docs/decisions.md "one P on the Morph model").
+MODES = "none,none+floor,post:1,morph,physdiff:end:4,space:1"
 CONTROL_MODES = "none,none+floor"
 
 
@@ -65,8 +66,8 @@ def _control(folder: Path) -> tuple[str, Path]:
 
 def morph_table(data: str, run: Path, base: str | None, cfg: EvaluateConfig, evaluator: Evaluator,
                 parts: Path, controls: list[Path] = ()) -> EvalTable:  # fmt: skip
-    """One EvalTable over the base model (BASE_MODES), every round of ``run`` (ROUND_MODES) and each
-    real-only control (CONTROL_MODES).
+    """One EvalTable over the base model and every round of ``run`` (MODES), and each real-only control
+    (CONTROL_MODES).
 
     Each (model, mode) table is kept in ``parts/<model>__<mode>.json`` and reused by a re-run with the same
     settings: an interrupted study loses at most one evaluation, and a changed mode is re-run alone
@@ -75,7 +76,7 @@ def morph_table(data: str, run: Path, base: str | None, cfg: EvaluateConfig, eva
 
     rows: dict = {}
     meta: dict = {"models": {}, "rounds": {}}
-    models = [("base", _base(run, base), BASE_MODES)] + [(n, f, ROUND_MODES) for n, f in _rounds(run)]
+    models = [("base", _base(run, base), MODES)] + [(n, f, MODES) for n, f in _rounds(run)]
     models += [(*_control(Path(c)), CONTROL_MODES) for c in controls]
     for name, folder, modes in models:
         net, sha = None, weights_sha256(folder)

@@ -97,6 +97,8 @@ def morph_quotes() -> list[str]:
         f"none {chain('none', err, '.1f')} mm",
         f"none+floor {chain('none+floor', err, '.1f')} mm",
         f"morph {chain('morph', err, '.1f')} mm",
+        f"post:1 {chain('post:1', err, '.1f')} mm",
+        f"physdiff {chain(PHYSDIFF, err, '.1f')} mm",
         f"FID {chain('none', fid, '.3f')}",
         f"PhysDiff {err['base ' + PHYSDIFF]:.1f} mm",
     ] + [f"{name}: none {err[name + ' none']:.1f} mm, FID {fid[name + ' none']:.3f}"
@@ -150,7 +152,8 @@ def new_prompts_morph_quotes() -> list[str]:
     quotes = [f"none {err(default, 'none'):.1f} -> {err(morph, 'none'):.1f} mm "
               f"({_change(err(morph, 'none'), err(default, 'none'))}; per seed {per_seed} %)"]
     names = {"none+floor": "none+floor", "post:1": "post:1", PHYSDIFF: "PhysDiff", "morph": "morph"}
-    return quotes + [f"{name} {err(default, mode):.1f} -> {err(morph, mode):.1f}" for mode, name in names.items()]
+    return quotes + [f"{name} {err(default, mode):.1f} -> {err(morph, mode):.1f}"
+                     for mode, name in names.items()]
 
 
 def biomodiffuse_quotes() -> list[str]:
