@@ -126,34 +126,40 @@ def dynamic_quotes() -> list[str]:
     ]
 
 
+def _prompts_mean(runs: dict, mode: str, key: str = "phys_err", seed: int | None = None) -> float:
+    """A bench/physdiff_quality.py figure (category -> one row per seed) averaged over the categories in
+    ``runs`` and over the seeds, or at one ``seed``."""
+    return float(np.mean([r[mode][key] for rows in runs.values() for s, r in enumerate(rows)
+                          if seed in (None, s)]))  # fmt: skip
+
+
 def new_prompts_quotes() -> list[str]:
     """The unseen-prompt bench (results/new_prompts_default.json): PhysDiff against none per category, and
-    the share of its projections in which the humanoid fell, both means over the seeds (as the bench prints)."""
+    the share of its projections in which the humanoid fell, both means over the seeds (as the bench
+    prints)."""
     runs = _load("new_prompts_default.json")["runs"]
 
-    def mean(rows: list[dict], mode: str, key: str) -> float:
-        return sum(r[mode][key] for r in rows) / len(rows)
+    def quote(cat: str) -> str:
+        one = {cat: runs[cat]}
+        return (f"{cat} {_change(_prompts_mean(one, PHYSDIFF), _prompts_mean(one, 'none'))} "
+                f"({100 * (1 - _prompts_mean(one, PHYSDIFF, 'tracked')):.0f} % fell)")
 
-    return [f"{cat} {_change(mean(rows, PHYSDIFF, 'phys_err'), mean(rows, 'none', 'phys_err'))} "
-            f"({100 * (1 - mean(rows, PHYSDIFF, 'tracked')):.0f} % fell)" for cat, rows in runs.items()]
+    return [quote(cat) for cat in runs]
 
 
 def new_prompts_morph_quotes() -> list[str]:
     """The Morph-tuned model against the default on the unseen prompts (results/new_prompts_morph.json):
     each mode's Phys-Err, mean over categories and seeds, and plain sampling's change per seed."""
     default, morph = _load("new_prompts_default.json")["runs"], _load("new_prompts_morph.json")["runs"]
-
-    def err(runs: dict, mode: str, seed: int | None = None) -> float:
-        return float(np.mean([r[mode]["phys_err"] for rows in runs.values()
-                              for s, r in enumerate(rows) if seed in (None, s)]))  # fmt: skip
-
     seeds = range(len(next(iter(default.values()))))
-    per_seed = " / ".join(f"{100 * (err(morph, 'none', s) / err(default, 'none', s) - 1):.0f}" for s in seeds)
-    quotes = [f"none {err(default, 'none'):.1f} -> {err(morph, 'none'):.1f} mm "
-              f"({_change(err(morph, 'none'), err(default, 'none'))}; per seed {per_seed} %)"]
-    names = {"none+floor": "none+floor", "post:1": "post:1", PHYSDIFF: "PhysDiff", "morph": "morph"}
-    return quotes + [f"{name} {err(default, mode):.1f} -> {err(morph, mode):.1f}"
-                     for mode, name in names.items()]
+    ratios = (_prompts_mean(morph, "none", seed=s) / _prompts_mean(default, "none", seed=s) for s in seeds)
+    per_seed = " / ".join(f"{100 * (r - 1):.0f}" for r in ratios)
+    none_before, none_after = _prompts_mean(default, "none"), _prompts_mean(morph, "none")
+    quotes = [f"none {none_before:.1f} -> {none_after:.1f} mm ({_change(none_after, none_before)}; "
+              f"per seed {per_seed} %)"]
+    modes = ("none+floor", "post:1", PHYSDIFF, "morph")
+    return quotes + [f"{'PhysDiff' if mode == PHYSDIFF else mode} {_prompts_mean(default, mode):.1f} -> "
+                     f"{_prompts_mean(morph, mode):.1f}" for mode in modes]
 
 
 def biomodiffuse_quotes() -> list[str]:
