@@ -51,6 +51,11 @@ class ShapingConfig:
     clearance: float = 0.03  # lift a swing foot by this much; 0: off
     clearance_speed: float = 0.5  # no lift below this horizontal foot speed, the full lift from twice it
     support: float = 0.02  # the other foot counts as on the floor within this height
+    # > 0: in a frame whose lowest point hovers less than this over the floor, ``support`` is measured from
+    # that point, so a generated stance foot hovering a few centimetres up still lets the swing foot be
+    # lifted (P puts the body down on it anyway). Off by default until the generation figures are
+    # re-measured with it (docs/decisions.md: "more tries at P on generated dynamic motion", 4).
+    hover_support: float = 0.0  # m
     # A fast foot on the floor under a slow foot in the air is a swing foot that dipped into the floor
     # (grounding then lifted the frame by it): lift it above the slow foot and lower the frame onto that.
     stance_by_speed: bool = True
@@ -145,7 +150,8 @@ def to_floor(model, qpos: np.ndarray, dt: float, float_window: float) -> np.ndar
 
 def swing_clearance(model, qpos: np.ndarray, dt: float, config: ShapingConfig) -> np.ndarray:
     """qpos (N, 70) at step ``dt`` with each swing foot raised by ``clearance`` metres while the other
-    foot is within ``support`` of the floor, scaled from 0 at a horizontal ankle speed of
+    foot is within ``support`` of the floor (of the frame's lowest point where it hovers less than
+    ``hover_support`` over the floor), scaled from 0 at a horizontal ankle speed of
     ``clearance_speed`` to 1 at twice that. A foot that stands still is left alone, so footholds do not
     move; a foot that slides along the floor in the reference is lifted like any other moving foot.
 
@@ -270,7 +276,10 @@ def _lift_swing_feet(model, qpos: np.ndarray, geo: _Geometry, dt: float, config:
     speed = np.linalg.norm(moved, axis=-1)  # (N, 2)
     weight = np.clip(speed / config.clearance_speed - 1.0, 0.0, 1.0)
     lifts = config.clearance * weight
-    other_up = geo.feet[:, ::-1] > config.support
+    floor = np.zeros_like(geo.lowest)
+    if config.hover_support > 0.0:
+        floor = np.where(geo.lowest < config.hover_support, np.maximum(geo.lowest, 0.0), 0.0)
+    other_up = geo.feet[:, ::-1] > floor[:, None] + config.support
     swapped = np.zeros_like(other_up)
     if config.stance_by_speed:
         # This foot moves and is on the floor; the other stands still above it: the other is the stance.

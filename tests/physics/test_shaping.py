@@ -106,6 +106,25 @@ def test_swing_clearance_lifts_swing_feet_only(walk_qpos) -> None:
     np.testing.assert_array_equal(unlifted, to_floor(model, qpos, DT, 1.0))
 
 
+def test_hover_support_lifts_the_swing_foot_of_a_hovering_walk(walk_qpos) -> None:
+    """The real walk raised 2.5 cm, as a generated stance foot hovers: the floor-based rule sees no support
+    and lifts nothing; with ``hover_support`` the lifts are the grounded walk's; a frame higher than
+    ``hover_support`` (a flight) is still left alone."""
+    model, qpos = walk_qpos
+    grounded = to_floor(model, qpos, DT, 1.0)
+    hovering = grounded.copy()
+    hovering[:, 2] += 0.025
+    lifts = swing_clearance(model, grounded, DT, ShapingConfig()) - grounded
+    assert np.abs(lifts).max() > 0.01  # the grounded walk's swing feet are lifted
+
+    np.testing.assert_array_equal(swing_clearance(model, hovering, DT, ShapingConfig()), hovering)
+    hover = ShapingConfig(hover_support=0.05)
+    np.testing.assert_allclose(swing_clearance(model, hovering, DT, hover) - hovering, lifts, atol=1e-6)
+    flying = grounded.copy()
+    flying[:, 2] += 0.08
+    np.testing.assert_array_equal(swing_clearance(model, flying, DT, hover), flying)
+
+
 def _foot_lowest(model, qpos: np.ndarray) -> np.ndarray:
     """(N, 2) lowest point of each foot (left, right: ankle and toe bodies) of every frame."""
     import mujoco
