@@ -164,6 +164,23 @@ def _identity(info: dict) -> dict:
     return {k: info.get(k) for k in keys}
 
 
+def _projection_defaults() -> dict:
+    """P's settings at their defaults, as synth.json stores them."""
+    info = asdict(ProjectionConfig())
+    info.pop("workers")
+    return json.loads(json.dumps(info))
+
+
+def _with_defaults(stored, defaults: dict):
+    """``stored`` settings (a synth.json's) with the fields it lacks taken at their defaults: a field is
+    added to P's configuration with a default that keeps what P did before, so a folder written before
+    the field existed was made with that default."""
+    if not isinstance(stored, dict):
+        return stored
+    filled = {k: _with_defaults(stored[k], v) if k in stored else v for k, v in defaults.items()}
+    return filled | {k: v for k, v in stored.items() if k not in defaults}
+
+
 def _check_resume(out: Path, info: dict) -> None:
     """Refuse a folder made by another model or with other settings; nothing is written before this."""
     path = out / SYNTH_INFO
@@ -180,12 +197,24 @@ def _check_resume(out: Path, info: dict) -> None:
     if old.get("model_sha256") != info["model_sha256"]:
         raise SynthError(f"{out} was made by another model ({old.get('model')}, sha256 "
                          f"{str(old.get('model_sha256'))[:12]}); choose another -o")  # fmt: skip
-    a, b = _identity(old), _identity(info)
-    diff = [k for k in a if a[k] != b[k]]
+    old["projection"] = _with_defaults(old.get("projection"), _projection_defaults())
+    diff = _first_difference(_identity(old), _identity(info))
     if diff:
-        k = diff[0]
-        raise SynthError(f"{out} was made with other settings ({k}: {a[k]} there, {b[k]} now); "
+        k, there, now = diff
+        raise SynthError(f"{out} was made with other settings ({k}: {there} there, {now} now); "
                          "choose another -o or the same settings")  # fmt: skip
+
+
+def _first_difference(a, b, path: str = ""):
+    """(dotted key, value in a, value in b) of the first setting where ``a`` and ``b`` differ, down to the
+    innermost key (P's settings nest three deep), or None."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        for k in list(a) + [k for k in b if k not in a]:
+            diff = _first_difference(a.get(k), b.get(k), f"{path}.{k}" if path else k)
+            if diff:
+                return diff
+        return None
+    return None if a == b else (path, a, b)
 
 
 def _save_npy(path: Path, array: np.ndarray) -> None:

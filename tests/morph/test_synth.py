@@ -126,11 +126,26 @@ def test_other_settings_are_refused(model, built_dir: Path, full: Path, tmp_path
         synthesize(None, built_dir, out, SynthConfig(sampler=SamplerConfig(steps=5), batch_size=2, max_frames=40,
                                                      seed=1), captions=CAPTIONS, model=model)  # fmt: skip
     # P with iterative learning control refines otherwise: a folder made with plain P is not continued.
-    with pytest.raises(PhysmotionError, match="other settings .projection"):
+    with pytest.raises(PhysmotionError, match=r"settings \(projection\.ilc_passes: 0 there, 2 now\)"):
         synthesize(None, built_dir, out, SynthConfig(sampler=SamplerConfig(steps=5), batch_size=2, max_frames=40,
                                                      ilc_passes=2), captions=CAPTIONS, model=model)  # fmt: skip
     assert SynthConfig(ilc_passes=2).projection().ilc_passes == 2
 
+
+def test_a_folder_older_than_a_setting_resumes(model, built_dir: Path, full: Path, tmp_path: Path) -> None:
+    """A P setting added later, at its default (which keeps what P did before), does not orphan a folder
+    whose synth.json predates it; the same setting at another value does."""
+    out = tmp_path / "older"
+    shutil.copytree(full, out)
+    info = json.loads((out / "synth.json").read_text())
+    del info["projection"]["shaping"]["hover_support"]
+    (out / "synth.json").write_text(json.dumps(info))
+    again = run(model, built_dir, out)
+    assert again.done == 0 and len(index_rows(out)) == len(index_rows(full))
+    info["projection"]["shaping"]["hover_support"] = 0.05
+    (out / "synth.json").write_text(json.dumps(info))
+    with pytest.raises(PhysmotionError, match=r"projection\.shaping\.hover_support: 0\.05 there, 0\.0 now"):
+        run(model, built_dir, out)
 
 def test_lengths_are_drawn_from_the_motions_the_model_trained_on(model, built_dir: Path) -> None:
     # The shipped model's run kept motions under 124 frames (--max-length 120); the split holds longer ones.
