@@ -171,7 +171,7 @@ def _projection_defaults() -> dict:
     return json.loads(json.dumps(info))
 
 
-def _with_defaults(stored, defaults: dict):
+def _with_defaults(stored: object, defaults: dict) -> object:
     """``stored`` settings (a synth.json's) with the fields it lacks taken at their defaults: a field is
     added to P's configuration with a default that keeps what P did before, so a folder written before
     the field existed was made with that default."""
@@ -205,7 +205,7 @@ def _check_resume(out: Path, info: dict) -> None:
                          "choose another -o or the same settings")  # fmt: skip
 
 
-def _first_difference(a, b, path: str = ""):
+def _first_difference(a: object, b: object, path: str = "") -> tuple[str, object, object] | None:
     """(dotted key, value in a, value in b) of the first setting where ``a`` and ``b`` differ, down to the
     innermost key (P's settings nest three deep), or None."""
     if isinstance(a, dict) and isinstance(b, dict):
