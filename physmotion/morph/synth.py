@@ -164,17 +164,20 @@ def _identity(info: dict) -> dict:
     return {k: info.get(k) for k in keys}
 
 
-def _projection_defaults() -> dict:
-    """P's settings at their defaults, as synth.json stores them."""
-    info = asdict(ProjectionConfig())
-    info.pop("workers")
-    return json.loads(json.dumps(info))
+def _setting_defaults() -> dict:
+    """The configuration sections of synth.json (pre-processing, P, sampler) at their defaults, as it
+    stores them."""
+    projection = asdict(ProjectionConfig())
+    projection.pop("workers")
+    sections = {"preprocess": asdict(PreprocessConfig()), "projection": projection,
+                "sampler": asdict(SamplerConfig())}  # fmt: skip
+    return json.loads(json.dumps(sections))
 
 
 def _with_defaults(stored: object, defaults: dict) -> object:
     """``stored`` settings (a synth.json's) with the fields it lacks taken at their defaults: a field is
-    added to P's configuration with a default that keeps what P did before, so a folder written before
-    the field existed was made with that default."""
+    added to a configuration with a default that keeps what the code did before, so a folder written
+    before the field existed was made with that default."""
     if not isinstance(stored, dict):
         return stored
     filled = {k: _with_defaults(stored[k], v) if k in stored else v for k, v in defaults.items()}
@@ -197,7 +200,7 @@ def _check_resume(out: Path, info: dict) -> None:
     if old.get("model_sha256") != info["model_sha256"]:
         raise SynthError(f"{out} was made by another model ({old.get('model')}, sha256 "
                          f"{str(old.get('model_sha256'))[:12]}); choose another -o")  # fmt: skip
-    old["projection"] = _with_defaults(old.get("projection"), _projection_defaults())
+    old = _with_defaults(old, _setting_defaults())
     diff = _first_difference(_identity(old), _identity(info))
     if diff:
         k, there, now = diff
