@@ -53,8 +53,9 @@ class ShapingConfig:
     support: float = 0.02  # the other foot counts as on the floor within this height
     # > 0: in a frame whose lowest point hovers less than this over the floor, ``support`` is measured from
     # that point, so a generated stance foot hovering a few centimetres up still lets the swing foot be
-    # lifted (P puts the body down on it anyway). Off by default until the generation figures are
-    # re-measured with it (docs/decisions.md: "more tries at P on generated dynamic motion", 4).
+    # lifted (P puts the body down on it anyway). 0.05 in generation's preset
+    # (``ProjectionConfig.sampling``); off here, for captured motion (docs/decisions.md: "support judged
+    # against a hovering frame in the sampling preset").
     hover_support: float = 0.0  # m
     # A fast foot on the floor under a slow foot in the air is a swing foot that dipped into the floor
     # (grounding then lifted the frame by it): lift it above the slow foot and lower the frame onto that.
