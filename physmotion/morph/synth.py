@@ -164,14 +164,19 @@ def _identity(info: dict) -> dict:
     return {k: info.get(k) for k in keys}
 
 
+def _setting_sections(
+    preprocess: PreprocessConfig, projection: ProjectionConfig, sampler: SamplerConfig
+) -> dict:
+    """The configuration sections of synth.json (pre-processing, P, sampler) as it stores them: P without
+    its worker count, which does not change the results."""
+    proj = asdict(projection)
+    proj.pop("workers")
+    return {"preprocess": asdict(preprocess), "projection": proj, "sampler": asdict(sampler)}
+
+
 def _setting_defaults() -> dict:
-    """The configuration sections of synth.json (pre-processing, P, sampler) at their defaults, as it
-    stores them."""
-    projection = asdict(ProjectionConfig())
-    projection.pop("workers")
-    sections = {"preprocess": asdict(PreprocessConfig()), "projection": projection,
-                "sampler": asdict(SamplerConfig())}  # fmt: skip
-    return json.loads(json.dumps(sections))
+    """The configuration sections of synth.json at their defaults, as a re-read synth.json has them."""
+    return json.loads(json.dumps(_setting_sections(PreprocessConfig(), ProjectionConfig(), SamplerConfig())))
 
 
 def _with_defaults(stored: object, defaults: dict) -> object:
@@ -304,15 +309,12 @@ def synthesize(
     plan = plan_items(texts, lengths, cfg.per_caption, cfg.seed, max_frames)
     projection = cfg.projection()
     plan_sha = hashlib.sha256("\n".join(f"{p.caption}\t{p.frames}" for p in plan).encode()).hexdigest()
-    proj_info = asdict(projection)
-    proj_info.pop("workers")
     info = {
         "model": str(folder), "model_sha256": sha, "feature_dim": FEATURE_DIM, "skeleton": "smpl22",
         "fps": FPS, "data": str(data_dir), "split": cfg.split, "per_caption": cfg.per_caption,
         "seed": cfg.seed, "tau": cfg.tau, "licence_tags": list(net.info.get("licence_tags", [])),
-        "licence_tag": net.licence_tag, "preprocess": asdict(cfg.preprocess), "projection": proj_info,
-        "sampler": asdict(cfg.sampler), "max_frames": max_frames, "items_planned": len(plan),
-        "plan_sha256": plan_sha,
+        "licence_tag": net.licence_tag, **_setting_sections(cfg.preprocess, projection, cfg.sampler),
+        "max_frames": max_frames, "items_planned": len(plan), "plan_sha256": plan_sha,
     }  # fmt: skip
     info = json.loads(json.dumps(info))  # tuples -> lists, as a re-read synth.json has them
     _check_resume(out, info)

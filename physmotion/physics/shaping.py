@@ -277,9 +277,9 @@ def _lift_swing_feet(model, qpos: np.ndarray, geo: _Geometry, dt: float, config:
     speed = np.linalg.norm(moved, axis=-1)  # (N, 2)
     weight = np.clip(speed / config.clearance_speed - 1.0, 0.0, 1.0)
     lifts = config.clearance * weight
-    floor = np.zeros_like(geo.lowest)
-    if config.hover_support > 0.0:
-        floor = np.where(geo.lowest < config.hover_support, np.maximum(geo.lowest, 0.0), 0.0)
+    # Where the frame hovers (0 <= lowest < hover_support) support is measured from its lowest point; with
+    # hover_support 0 no frame qualifies and the floor (0) is used.
+    floor = np.where(geo.lowest < config.hover_support, np.maximum(geo.lowest, 0.0), 0.0)
     other_up = geo.feet[:, ::-1] > floor[:, None] + config.support
     swapped = np.zeros_like(other_up)
     if config.stance_by_speed:
