@@ -467,7 +467,7 @@ def train_denoiser_cmd(
     checkpoint_minutes: float | None = typer.Option(
         None, help="Minutes between atomic checkpoints (default: 5.0)."),
     accel_weight: float | None = typer.Option(None, help="329-d data: weight of L_accel, the output's joint "
-                                              "accelerations (default: 1.0)."),
+                                              "accelerations (default: 0.1)."),
     phys_weight: float | None = typer.Option(None, help="biomo: weight of L_phys, the physical network's "
                                              "accelerations (default: 1.0)."),
     emg_weight: float | None = typer.Option(None, help="biomo: weight of its muscle-activation loss "
