@@ -141,6 +141,12 @@ def test_project_writes_the_simulated_motion(mocap_dir: Path, tmp_path: Path) ->
     assert res.returncode == 0, res.stderr
     assert int(re.search(r"MPJPE mean (\d+) mm", res.stdout)[1]) <= plain_mm
     assert Motion.load(tmp_path / "ilc.npz").joints.shape == (60, 22, 3)
+    # The finer simulation step is another simulation of the same motion, kept as the plain one is.
+    res = run("project", npz, "-o", tmp_path / "fine.npz", "--fine-step")
+    assert res.returncode == 0, res.stderr
+    assert "simulation kept" in res.stdout
+    fine = Motion.load(tmp_path / "fine.npz")
+    assert fine.joints.shape == (60, 22, 3) and not np.array_equal(fine.joints, Motion.load(out).joints)
     res = run("project", npz, "-o", tmp_path / "bad.npz", "--ilc", "-1")
     assert res.returncode == 1 and res.stderr.startswith("error: ilc_passes") and res.stderr.count("\n") == 1
     assert not (tmp_path / "bad.npz").exists()
