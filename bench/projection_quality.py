@@ -1,6 +1,7 @@
 """Physics projection on every captured clip of the bundled mocap, by category of motion: one table.
 
 Usage: python bench/projection_quality.py [--mocap ../shared/data/mocap] [--limit N] [--walks-runs] [--ilc N]
+       [--fine-step]
 One row per category (jump, kick, dance, run, turn, walk, other; from the captions), then "walks+runs"
 (the 203 walking/running clips of earlier figures) and "all": success (no MPJPE past 0.5 m), MPJPE, the
 physical metrics of input -> simulation (both on the clip's humanoid geometry, the input grounded on it:
@@ -28,18 +29,21 @@ def main() -> None:
     parser.add_argument("--limit", type=int, default=0, help="only the first N clips")
     parser.add_argument("--walks-runs", action="store_true", help="only the walking/running clips")
     parser.add_argument("--ilc", type=int, default=0, help="iterative learning control passes (project --ilc)")
+    parser.add_argument("--fine-step", action="store_true", help="simulate at 1/720 s (project --fine-step)")
     args = parser.parse_args()
     clips = load_manifest(args.mocap)
     if args.walks_runs:
         clips = [c for c in clips if LOCOMOTION.search(c.captions[0].lower())]
     clips = clips[: args.limit] if args.limit else clips
     start = time.perf_counter()
-    measured = measure_clips(clips, ProjectionConfig(ilc_passes=args.ilc))  # one worker process per core
+    config = ProjectionConfig.fine_step if args.fine_step else ProjectionConfig
+    measured = measure_clips(clips, config(ilc_passes=args.ilc))  # one worker process per core
     seconds = time.perf_counter() - start
     rows = by_category(clips, measured)
     failed = [c.clip for c, m in zip(clips, measured) if not m.result.success]
 
     ilc = f", ILC {args.ilc} passes" if args.ilc else ""
+    ilc += ", 1/720 s steps" if args.fine_step else ""
     table = Table(title=f"projection of {len(clips)} captured clips by category{ilc} ({seconds:.0f} s)",
                   caption=f"failed: {', '.join(failed) or '-'}")  # fmt: skip
     for col in ("category", "clips", "success", "MPJPE mm", "Penetrate", "Float", "Skate", "Phys-Err",

@@ -111,6 +111,7 @@ def dynamic_quotes() -> list[str]:
     now, before = configs["default"], configs["tracker v0.1"]
     loco, run, jump = now["walks+runs"], now["run"], now["jump"]
     ilc = configs["default + ILC"]["run"]
+    fine, fine_jump = configs["default at 1/720 s"]["run"], configs["default at 1/720 s"]["jump"]
     return [
         f"{100 * loco['success']:.1f} % tracked at {loco['mpjpe_mm']:.1f} mm",
         f"(tracker v0.1: {100 * before['walks+runs']['success']:.1f} % at {before['walks+runs']['mpjpe_mm']:.1f} mm)",
@@ -123,6 +124,8 @@ def dynamic_quotes() -> list[str]:
         f"jumps: Float {jump['float_in']:.1f} -> {jump['float_out']:.1f} mm",
         f"ILC: runs MPJPE {ilc['mpjpe_mm']:.1f} mm, Float {ilc['float_out']:.1f} mm, "
         f"Skate {ilc['skate_out']:.1f} mm",
+        f"1/720 s: runs MPJPE {fine['mpjpe_mm']:.1f} mm, Float {fine['float_out']:.1f} mm, "
+        f"Skate {fine['skate_out']:.1f} mm; jumps Skate {fine_jump['skate_out']:.1f} mm",
     ]
 
 
