@@ -198,7 +198,7 @@ def project_motion(
                             "and Float 15.0 -> 12.5 mm, for 3x the time; results/projection_dynamic.md)."),
     fine_step: bool = typer.Option(False, "--fine-step", help="Simulate at 1/720 s instead of 1/360 s: "
                                    "fast motion lands and pushes off better (captured runs' Float 15.0 -> "
-                                   "9.7 mm), for 2x the time; results/projection_dynamic.md."),
+                                   "9.7 mm), for twice the simulation steps; results/projection_dynamic.md."),
 ) -> None:
     """Physics projection (PhysDiff's P): imitate the motion with the simulated humanoid."""
     from dataclasses import replace

@@ -347,4 +347,3 @@ def test_fine_step_lands_runs_nearer_the_input(mocap_dir) -> None:
     assert fine["float_out"] <= fine["float_in"] + 2.0
     assert fine["mpjpe_mm"] < plain["mpjpe_mm"]
     assert abs(fine["airborne_out"] - fine["airborne_in"]) <= 0.05 < plain["airborne_out"] - plain["airborne_in"]
-
