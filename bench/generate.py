@@ -2,7 +2,8 @@
 
 Usage: python bench/generate.py [--model DIR] [--morph DIR] [--biomo DIR] [--seconds 6] [--repeats 2]
 Modes: none, morph (Morph's inference: pre-processing, one P, imitation selection), post:4 (as many
-projections as PhysDiff's default) and physdiff:end:4,space:1; batches of 1
+projections as PhysDiff's default), physdiff:end:4,space:1, and PhysDiff with every projection at 1/720 s
+(``generate --fine-step``); batches of 1
 and 16 motions (one caption each, from the physics prompt set); 50 DDIM steps, CFG 2.5. The model and the
 text encoder are loaded and warmed up once before timing; each time is the best of ``--repeats`` rounds.
 PhysDiff reports 2.5x none at batch 1.
@@ -80,6 +81,7 @@ def main() -> None:
     base = GenerateConfig(seconds=args.seconds)
     generate(PHYSICS_PROMPTS[:1], replace(base, physics="none"), model)  # warm-up: encoder load, first calls
     runs = {mode: (model, replace(base, physics=mode)) for mode in MODES}
+    runs[f"{PHYSDIFF} at 1/720 s"] = (model, replace(base, physics=PHYSDIFF).at_fine_step())
     if args.biomo:
         biomo = MotionDiffusion.load(args.biomo)
         runs[BIOMO] = (biomo, replace(base, physics="none", sampler=default_sampler(biomo)))

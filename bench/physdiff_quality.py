@@ -3,6 +3,7 @@ model: one table from one run.
 
 Usage: python bench/physdiff_quality.py [--model DIR] [--prompts 32] [--seeds 0,1,2] [--json FILE]
        python bench/physdiff_quality.py --set new [--model DIR] [--seeds 0] [--json FILE]
+       (either with --fine-step: every projection at 1/720 s, as ``generate --fine-step``)
 (--json also writes every mode's metrics per seed, e.g. results/physdiff_quality.json, which the README
 quotes and tests/test_results.py checks it against.)
 Rows: none (as sampled), none+floor (each motion moved vertically by the constant shift that leaves it the
@@ -22,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import replace
 
 import numpy as np
 from rich.console import Console
@@ -46,15 +48,18 @@ def main() -> None:
     parser.add_argument("--json", default=None, help="also write the per-seed metrics to this file")
     parser.add_argument("--set", choices=("physics", "new"), default="physics",
                         help="physics: the 32 prompts in our captions' words; new: the unseen prompts by category")
+    parser.add_argument("--fine-step", action="store_true", help="every projection at 1/720 s (generate --fine-step)")
     args = parser.parse_args()
     seeds = [int(s) for s in args.seeds.split(",")]
     model = MotionDiffusion.load(args.model)
+    base = GenerateConfig().at_fine_step() if args.fine_step else GenerateConfig()
     if args.set == "new":
-        _new_prompts(model, seeds, args.json)
+        _new_prompts(model, seeds, args.json, base)
         return
     prompts = PHYSICS_PROMPTS[: args.prompts]
-    runs = [compare_modes(model, prompts, MODES, GenerateConfig(seed=seed)) for seed in seeds]
-    table = Table(title=f"physics modes, {len(prompts)} prompts, 6 s each, mean over seeds {args.seeds}")
+    runs = [compare_modes(model, prompts, MODES, replace(base, seed=seed)) for seed in seeds]
+    step = f", P at 1/{round(1 / base.projection.humanoid.sim_dt)} s"
+    table = Table(title=f"physics modes, {len(prompts)} prompts, 6 s each{step}, mean over seeds {args.seeds}")
     for col in ("mode", "Penetrate", "Float", "Skate", "Phys-Err", "vs none", "vs none+floor",
                 "per seed (vs none+floor)", "no fall", "reset", "resets", "s/motion"):
         table.add_column(col, justify="left" if col == "mode" else "right")
@@ -71,18 +76,19 @@ def main() -> None:
                       *(falls if projected else ["-"] * 3), f"{mean['seconds_per_motion']:.2f}")
     Console(width=160, emoji=False).print(table)
     if args.json:
-        meta = {"prompts": len(prompts), "seconds": GenerateConfig().seconds, "seeds": seeds,
-                "model_steps": model.info.get("steps")}
+        meta = {"prompts": len(prompts), "seconds": base.seconds, "seeds": seeds,
+                "model_steps": model.info.get("steps"), "sim_dt": base.projection.humanoid.sim_dt}
         runs = [{m: {k: (None if np.isnan(v) else v) for k, v in row.items()} for m, row in run.items()}
                 for run in runs]  # strict JSON: no NaN (the unprojected rows have no fall counts)
         write_atomic(args.json, lambda f: f.write(json.dumps({"meta": meta, "runs": runs}, indent=2)), "w")
 
 
-def _new_prompts(model: MotionDiffusion, seeds: list[int], json_path: str | None) -> None:
+def _new_prompts(model: MotionDiffusion, seeds: list[int], json_path: str | None, base: GenerateConfig) -> None:
     """One row per category and mode of NEW_PROMPTS (means over the category's prompts and the seeds)."""
-    runs = {cat: [compare_modes(model, list(prompts), NEW_SET_MODES, GenerateConfig(seed=seed)) for seed in seeds]
+    runs = {cat: [compare_modes(model, list(prompts), NEW_SET_MODES, replace(base, seed=seed)) for seed in seeds]
             for cat, prompts in NEW_PROMPTS.items()}  # fmt: skip
-    table = Table(title=f"unseen prompts ({sum(map(len, NEW_PROMPTS.values()))}), 6 s each, seeds "
+    step = f", P at 1/{round(1 / base.projection.humanoid.sim_dt)} s"
+    table = Table(title=f"unseen prompts ({sum(map(len, NEW_PROMPTS.values()))}), 6 s each{step}, seeds "
                   f"{','.join(map(str, seeds))}, model steps {model.info.get('steps')}")  # fmt: skip
     for col in ("category", "mode", "Penetrate", "Float", "Skate", "Phys-Err", "vs none", "vs none+floor",
                 "reset", "imitation failed", "s/motion"):
@@ -103,7 +109,8 @@ def _new_prompts(model: MotionDiffusion, seeds: list[int], json_path: str | None
         clean = {cat: [{m: {k: (None if np.isnan(v) else v) for k, v in row.items()} for m, row in run.items()}
                        for run in cat_runs] for cat, cat_runs in runs.items()}  # fmt: skip
         meta = {"set": "new", "prompts": {c: list(p) for c, p in NEW_PROMPTS.items()}, "seeds": seeds,
-                "model_steps": model.info.get("steps"), "model_info": model.info.get("morph", {})}
+                "model_steps": model.info.get("steps"), "model_info": model.info.get("morph", {}),
+                "sim_dt": base.projection.humanoid.sim_dt}
         write_atomic(json_path, lambda f: f.write(json.dumps({"meta": meta, "runs": clean}, indent=2)), "w")
 
 

@@ -36,8 +36,9 @@ def main() -> None:
         clips = [c for c in clips if LOCOMOTION.search(c.captions[0].lower())]
     clips = clips[: args.limit] if args.limit else clips
     start = time.perf_counter()
-    config = ProjectionConfig.fine_step if args.fine_step else ProjectionConfig
-    measured = measure_clips(clips, config(ilc_passes=args.ilc))  # one worker process per core
+    config = ProjectionConfig(ilc_passes=args.ilc)
+    config = config.at_fine_step() if args.fine_step else config
+    measured = measure_clips(clips, config)  # one worker process per core
     seconds = time.perf_counter() - start
     rows = by_category(clips, measured)
     failed = [c.clip for c, m in zip(clips, measured) if not m.result.success]

@@ -23,7 +23,7 @@ import sys
 import time
 import unicodedata
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -55,6 +55,12 @@ class GenerateConfig:
 
     def __post_init__(self) -> None:
         self.physics = PhysicsMode.parse(self.physics)
+
+    def at_fine_step(self) -> GenerateConfig:
+        """This run with every P (``post``, ``physdiff``, ``morph``) at half the simulation step
+        (:meth:`ProjectionConfig.at_fine_step`; ``generate --fine-step``)."""
+        return replace(self, projection=self.projection.at_fine_step(),
+                       morph_projection=self.morph_projection.at_fine_step())  # fmt: skip
 
 
 @dataclass
@@ -333,8 +339,10 @@ def write_outputs(
     log = result.projections
     settings = asdict(config)
     settings["physics"] = str(config.physics)
-    settings["projection"] = reset_settings(config.projection)
-    settings["morph_projection"] = reset_settings(config.morph_projection)
+    # P's fall handling and its simulation step (generate --fine-step halves it) identify the projection.
+    settings["projection"] = reset_settings(config.projection) | {"sim_dt": config.projection.humanoid.sim_dt}
+    settings["morph_projection"] = reset_settings(config.morph_projection) | {
+        "sim_dt": config.morph_projection.humanoid.sim_dt}
     record = {
         "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "prompts": texts,

@@ -9,8 +9,8 @@ the whole root wrench, bounded at 0.3 W and held over 4 simulation steps), "+ to
 made ballistic), and "default" (``ProjectionConfig()``: all of it, the residual bounded at 0.2 W and held
 over 2 steps, the feet's fit weighting torque 0.3), and "default + ILC" (iterative learning control:
 ``ProjectionConfig(ilc_passes=2)``, the option of ``physmotion project --ilc``, three simulations per clip),
-and "default at 1/720 s" (``ProjectionConfig.fine_step()``, the option of ``physmotion project --fine-step``:
-half the simulation step, twice the steps).
+and "default at 1/720 s" (``ProjectionConfig().at_fine_step()``, the option of ``physmotion project
+--fine-step``: half the simulation step, twice the steps).
 Categories from the captions (physmotion.eval.projection_quality.category). Input metrics are measured on
 the input grounded on the humanoid's surface (the metrics' floor convention), output metrics on the
 simulation; airborne: share of frames with no foot patch within 2 cm of the floor.
@@ -48,7 +48,7 @@ def configs() -> dict[str, ProjectionConfig]:
         "+ ballistic flight": held,
         "default": base,
         "default + ILC": replace(base, ilc_passes=2),
-        "default at 1/720 s": ProjectionConfig.fine_step(),
+        "default at 1/720 s": ProjectionConfig().at_fine_step(),
     }
 
 

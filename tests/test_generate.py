@@ -118,6 +118,30 @@ def test_cli_generate_writes_files(tiny_model_dir: Path, tmp_path: Path) -> None
     assert sorted(p.suffix for p in out.iterdir()) == [".bvh", ".gif", ".json", ".npz"]
 
 
+def test_at_fine_step_halves_every_projections_step() -> None:
+    config = GenerateConfig(physics="post:1", seed=3)
+    fine = config.at_fine_step()
+    for name in ("projection", "morph_projection"):
+        assert getattr(fine, name) == getattr(config, name).at_fine_step()
+    assert (fine.physics, fine.seed, fine.sampler) == (config.physics, config.seed, config.sampler)
+
+
+def test_cli_generate_fine_step_is_another_projection_and_is_logged(tiny_model_dir: Path, tmp_path: Path) -> None:
+    """``--fine-step`` simulates P at 1/720 s: the run log says so, and the projected motion differs."""
+    joints = {}
+    for name, extra in (("plain", []), ("fine", ["--fine-step"])):
+        out = tmp_path / name
+        res = run("generate", "a person walks forward", "--model", tiny_model_dir, "--seconds", "2",
+                  "--physics", "post:1", "--steps", "4", "--no-preview", "-o", out, *extra)  # fmt: skip
+        assert res.returncode == 0, res.stderr
+        settings = json.loads((out / "generate.json").read_text())["runs"][-1]["settings"]
+        step = 1 / 720 if extra else 1 / 360
+        assert settings["projection"]["sim_dt"] == pytest.approx(step)
+        assert settings["morph_projection"]["sim_dt"] == pytest.approx(step)
+        joints[name] = Motion.load(next(out.glob("*.npz"))).joints
+    assert joints["plain"].shape == joints["fine"].shape and not np.array_equal(joints["plain"], joints["fine"])
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [
@@ -211,7 +235,7 @@ def test_console_script_generate_morph_writes_the_same_files(tmp_path: Path) -> 
     assert names["morph"] == names["none"]
     run_log = json.loads((tmp_path / "morph" / "generate.json").read_text())["runs"][-1]
     assert run_log["settings"]["physics"] == "morph"
-    assert run_log["settings"]["morph_projection"] == {"reset_on_fail": False, "tau": 0.5}
+    assert run_log["settings"]["morph_projection"] == {"reset_on_fail": False, "tau": 0.5, "sim_dt": 1 / 360}
     assert run_log["projections"]["imitation_failures"] in (0, 1)
     assert 0.0 <= run_log["projections"]["imitation_failure_rate"] <= 1.0
     assert isinstance(run_log["motions"][0]["imitation_failed"], bool)

@@ -109,17 +109,16 @@ class ProjectionConfig:
         }
         return cls(**{**defaults, **overrides})
 
-    @classmethod
-    def fine_step(cls, **overrides) -> ProjectionConfig:
-        """The plain projection simulated at 1/720 s instead of 1/360 s: twice the simulation steps (1.2x
-        the wall time over the 369 captured clips); the root residual is held over twice as many steps, so
-        it still changes at the same rate. On captured runs the contacts resolve better: Float 15.0 -> 9.7
-        mm, MPJPE 50.2 -> 40.6 mm. An option (``physmotion project --fine-step``), not the default: 2 of
-        the 123 captured walks fail under it (docs/decisions.md: "the finer step as an option for the
-        plain P")."""
-        base = HumanoidConfig()
-        humanoid = replace(base, sim_dt=base.sim_dt / 2, residual_every=2 * base.residual_every)
-        return cls(**{"humanoid": humanoid, **overrides})
+    def at_fine_step(self) -> ProjectionConfig:
+        """This P simulated at half the step (1/720 s for the default 1/360 s): twice the simulation steps
+        (1.2x the wall time of the plain P over the 369 captured clips); the root residual is held over
+        twice as many steps, so it still changes at the same rate. On captured runs the contacts resolve
+        better: Float 15.0 -> 9.7 mm, MPJPE 50.2 -> 40.6 mm. An option (``physmotion project
+        --fine-step``, ``generate --fine-step``), not the default: 2 of the 123 captured walks fail under
+        the plain P at this step, and PhysDiff costs more than the issue allows (docs/decisions.md: "the
+        finer step as an option for the plain P")."""
+        h = self.humanoid
+        return replace(self, humanoid=replace(h, sim_dt=h.sim_dt / 2, residual_every=2 * h.residual_every))
 
 
 @dataclass

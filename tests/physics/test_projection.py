@@ -3,6 +3,8 @@ does not do yet: the all-clips targets are measured by bench/projection_quality.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -321,15 +323,17 @@ def test_ilc_settings_are_checked() -> None:
 
 
 def test_fine_step_halves_the_step_and_keeps_the_residual_rate() -> None:
-    fine, plain = ProjectionConfig.fine_step().humanoid, ProjectionConfig().humanoid
-    assert fine.sim_dt == pytest.approx(plain.sim_dt / 2)
-    assert fine.sim_dt * fine.residual_every == pytest.approx(plain.sim_dt * plain.residual_every)
-    assert ProjectionConfig.fine_step(ilc_passes=2).ilc_passes == 2
+    for config in (ProjectionConfig(ilc_passes=2), ProjectionConfig.sampling()):
+        fine = config.at_fine_step()
+        assert fine.humanoid.sim_dt == pytest.approx(config.humanoid.sim_dt / 2)
+        rate = config.humanoid.sim_dt * config.humanoid.residual_every
+        assert fine.humanoid.sim_dt * fine.humanoid.residual_every == pytest.approx(rate)
+        assert replace(fine, humanoid=config.humanoid) == config  # nothing else changes
 
 
 @pytest.mark.slow
 def test_fine_step_lands_runs_nearer_the_input(mocap_dir) -> None:
-    """``ProjectionConfig.fine_step()`` (1/720 s) on every 6th captured run, against the default (1/360 s):
+    """``ProjectionConfig().at_fine_step()`` (1/720 s) on every 6th captured run, against the default (1/360 s):
     the runners float less, fly about as often as the captured ones and track closer. Measured on these 9
     runs: MPJPE 47.4 -> 32.7 mm, Float 20.5 -> 12.2 mm (input 12.8), airborne 32 -> 23 % (input 22 %); Skate
     8.3 -> 8.9 mm (input 4.4) is not helped. Over all 53 runs: results/projection_dynamic.md."""
@@ -337,7 +341,8 @@ def test_fine_step_lands_runs_nearer_the_input(mocap_dir) -> None:
     from physmotion.io.importer import load_manifest
 
     runs = [c for c in load_manifest(mocap_dir) if category(c.captions) == "run"][::6]
-    plain, fine = summarize(measure_clips(runs)), summarize(measure_clips(runs, ProjectionConfig.fine_step()))
+    plain = summarize(measure_clips(runs))
+    fine = summarize(measure_clips(runs, ProjectionConfig().at_fine_step()))
     print(f"\n{len(runs)} runs: MPJPE {plain['mpjpe_mm']:.1f} -> {fine['mpjpe_mm']:.1f} mm, Float "
           f"{plain['float_out']:.1f} -> {fine['float_out']:.1f} mm (input {plain['float_in']:.1f}), Skate "
           f"{plain['skate_out']:.2f} -> {fine['skate_out']:.2f} mm (input {plain['skate_in']:.2f}), airborne "
