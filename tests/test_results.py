@@ -150,6 +150,19 @@ def new_prompts_quotes() -> list[str]:
     return [quote(cat) for cat in runs]
 
 
+def new_prompts_fine_quotes() -> list[str]:
+    """The unseen-prompt bench with P at 1/720 s (results/new_prompts_fine.json) against 1/360 s: each
+    projected mode's mean Phys-Err, and PhysDiff against none per category as new_prompts_quotes."""
+    default, fine = _load("new_prompts_default.json")["runs"], _load("new_prompts_fine.json")["runs"]
+    quotes = [f"{'PhysDiff' if mode == PHYSDIFF else mode} {_prompts_mean(default, mode):.1f} -> "
+              f"{_prompts_mean(fine, mode):.1f}" for mode in ("post:1", PHYSDIFF, "morph")]
+    for cat in fine:
+        one = {cat: fine[cat]}
+        quotes.append(f"{cat} {_change(_prompts_mean(one, PHYSDIFF), _prompts_mean(one, 'none'))} "
+                      f"({100 * (1 - _prompts_mean(one, PHYSDIFF, 'tracked')):.0f} % fell)")
+    return quotes
+
+
 def new_prompts_morph_quotes() -> list[str]:
     """The Morph-tuned model against the default on the unseen prompts (results/new_prompts_morph.json):
     each mode's Phys-Err, mean over categories and seeds, and plain sampling's change per seed."""
@@ -191,6 +204,7 @@ QUOTES = {  # which doc quotes which result file
     ("results", "dynamic"): dynamic_quotes,
     ("results", "new prompts"): new_prompts_quotes,
     ("results", "new prompts morph"): new_prompts_morph_quotes,
+    ("results", "new prompts fine"): new_prompts_fine_quotes,
     ("morph card", "new prompts morph"): new_prompts_morph_quotes,
     ("README", "biomodiffuse"): biomodiffuse_quotes,
     ("results", "biomodiffuse"): biomodiffuse_quotes,
@@ -203,6 +217,7 @@ def _section(text: str, source: str) -> str:
              "morph": "results/morph.md",
              "dynamic": "projection_dynamic",
              "new prompts": "new_prompts_default", "new prompts morph": "new_prompts_morph",
+             "new prompts fine": "new_prompts_fine",
              "biomodiffuse": "results/biomodiffuse"}
     marker = files[source]
     return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
