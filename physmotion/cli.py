@@ -367,7 +367,7 @@ def generate_cmd(
     model: Path | None = typer.Option(None, help="Model folder; the shipped model if left out."),
     fine_step: bool = typer.Option(False, "--fine-step", help="Simulate the projection at 1/720 s instead "
                                    "of 1/360 s: PhysDiff on unseen prompts 12.5 -> 11.2 mm Phys-Err, for "
-                                   "more time (bench/generate.py)."),
+                                   "1.3-1.4x PhysDiff's time (bench/generate.py)."),
     preview: bool = typer.Option(True, help="Write a GIF preview per motion."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace files of the same names instead of "
                                    "refusing (with --no-preview, an old GIF of the same name is removed)."),
