@@ -48,7 +48,8 @@ def main() -> None:
     parser.add_argument("--json", default=None, help="also write the per-seed metrics to this file")
     parser.add_argument("--set", choices=("physics", "new"), default="physics",
                         help="physics: the 32 prompts in our captions' words; new: the unseen prompts by category")
-    parser.add_argument("--fine-step", action="store_true", help="every projection at 1/720 s (generate --fine-step)")
+    parser.add_argument("--fine-step", action="store_true",
+                        help="every projection at 1/720 s (generate --fine-step)")
     args = parser.parse_args()
     seeds = [int(s) for s in args.seeds.split(",")]
     model = MotionDiffusion.load(args.model)
@@ -58,8 +59,8 @@ def main() -> None:
         return
     prompts = PHYSICS_PROMPTS[: args.prompts]
     runs = [compare_modes(model, prompts, MODES, replace(base, seed=seed)) for seed in seeds]
-    step = f", P at 1/{round(1 / base.projection.humanoid.sim_dt)} s"
-    table = Table(title=f"physics modes, {len(prompts)} prompts, 6 s each{step}, mean over seeds {args.seeds}")
+    table = Table(title=f"physics modes, {len(prompts)} prompts, 6 s each{_step(base)}, mean over seeds "
+                        f"{args.seeds}")
     for col in ("mode", "Penetrate", "Float", "Skate", "Phys-Err", "vs none", "vs none+floor",
                 "per seed (vs none+floor)", "no fall", "reset", "resets", "s/motion"):
         table.add_column(col, justify="left" if col == "mode" else "right")
@@ -83,12 +84,17 @@ def main() -> None:
         write_atomic(args.json, lambda f: f.write(json.dumps({"meta": meta, "runs": runs}, indent=2)), "w")
 
 
+def _step(base: GenerateConfig) -> str:
+    """The projection's simulation step, for a table title."""
+    return f", P at 1/{round(1 / base.projection.humanoid.sim_dt)} s"
+
+
 def _new_prompts(model: MotionDiffusion, seeds: list[int], json_path: str | None, base: GenerateConfig) -> None:
     """One row per category and mode of NEW_PROMPTS (means over the category's prompts and the seeds)."""
     runs = {cat: [compare_modes(model, list(prompts), NEW_SET_MODES, replace(base, seed=seed)) for seed in seeds]
             for cat, prompts in NEW_PROMPTS.items()}  # fmt: skip
-    step = f", P at 1/{round(1 / base.projection.humanoid.sim_dt)} s"
-    table = Table(title=f"unseen prompts ({sum(map(len, NEW_PROMPTS.values()))}), 6 s each{step}, seeds "
+    table = Table(title=f"unseen prompts ({sum(map(len, NEW_PROMPTS.values()))}), 6 s each{_step(base)}, "
+                  f"seeds "
                   f"{','.join(map(str, seeds))}, model steps {model.info.get('steps')}")  # fmt: skip
     for col in ("category", "mode", "Penetrate", "Float", "Skate", "Phys-Err", "vs none", "vs none+floor",
                 "reset", "imitation failed", "s/motion"):

@@ -43,9 +43,8 @@ def main() -> None:
     rows = by_category(clips, measured)
     failed = [c.clip for c, m in zip(clips, measured) if not m.result.success]
 
-    ilc = f", ILC {args.ilc} passes" if args.ilc else ""
-    ilc += ", 1/720 s steps" if args.fine_step else ""
-    table = Table(title=f"projection of {len(clips)} captured clips by category{ilc} ({seconds:.0f} s)",
+    options = (f", ILC {args.ilc} passes" if args.ilc else "") + (", 1/720 s steps" if args.fine_step else "")
+    table = Table(title=f"projection of {len(clips)} captured clips by category{options} ({seconds:.0f} s)",
                   caption=f"failed: {', '.join(failed) or '-'}")  # fmt: skip
     for col in ("category", "clips", "success", "MPJPE mm", "Penetrate", "Float", "Skate", "Phys-Err",
                 "airborne", "residual F (W)", "residual τ (W m)"):  # fmt: skip

@@ -30,7 +30,7 @@ import numpy as np
 
 from physmotion.conventions import FPS, MIN_FRAMES
 from physmotion.diffusion.model import MotionDiffusion
-from physmotion.diffusion.physdiff import FeatureProjector, ProjectionLog, on_data_floor, reset_settings
+from physmotion.diffusion.physdiff import FeatureProjector, ProjectionLog, on_data_floor, projection_settings
 from physmotion.diffusion.samplers import SamplerConfig, sample
 from physmotion.errors import PhysmotionError
 from physmotion.features.humanml3d import recover_from_ric
@@ -339,10 +339,8 @@ def write_outputs(
     log = result.projections
     settings = asdict(config)
     settings["physics"] = str(config.physics)
-    # P's fall handling and its simulation step (generate --fine-step halves it) identify the projection.
-    settings["projection"] = reset_settings(config.projection) | {"sim_dt": config.projection.humanoid.sim_dt}
-    settings["morph_projection"] = reset_settings(config.morph_projection) | {
-        "sim_dt": config.morph_projection.humanoid.sim_dt}
+    settings["projection"] = projection_settings(config.projection)
+    settings["morph_projection"] = projection_settings(config.morph_projection)
     record = {
         "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "prompts": texts,

@@ -29,9 +29,10 @@ from physmotion.features.humanml3d import FEATURE_DIM, extract_features, recover
 from physmotion.physics.projection import ProjectionConfig, project
 
 
-def reset_settings(config: ProjectionConfig) -> dict[str, bool | float]:
-    """How P treats a fall, as recorded with generated files and evaluation tables."""
-    return {"reset_on_fail": config.reset_on_fail, "tau": config.tau}
+def projection_settings(config: ProjectionConfig) -> dict[str, bool | float]:
+    """How P treats a fall and the step it simulates at (``--fine-step`` halves it), as recorded with
+    generated files and evaluation tables."""
+    return {"reset_on_fail": config.reset_on_fail, "tau": config.tau, "sim_dt": config.humanoid.sim_dt}
 
 
 def parse_schedule(spec: str, steps: int) -> list[int]:

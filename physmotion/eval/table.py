@@ -38,7 +38,7 @@ import numpy as np
 from physmotion.conventions import FPS
 from physmotion.data.dataset import MotionItem, load_items
 from physmotion.diffusion.model import MotionDiffusion
-from physmotion.diffusion.physdiff import joints_to_features, on_data_floor, reset_settings
+from physmotion.diffusion.physdiff import joints_to_features, on_data_floor, projection_settings
 from physmotion.errors import PhysmotionError
 from physmotion.eval.evaluator import Evaluator
 from physmotion.eval.physics_modes import imitation_columns, metric_surface, reset_columns
@@ -195,8 +195,8 @@ def evaluate(
             "model_trained_on": model.info.get("data", ""), "model_steps": model.info.get("steps"),
             "model_licence": model.licence_tag, "evaluator_licence": evaluator.licence_tag,
             "sampler": asdict(cfg.base.sampler),
-            "projection": reset_settings(cfg.base.projection),
-            "morph_projection": reset_settings(cfg.base.morph_projection),
+            "projection": projection_settings(cfg.base.projection),
+            "morph_projection": projection_settings(cfg.base.morph_projection),
             "surface": cfg.surface, "seed": cfg.seed,
             "data": str(data)}  # fmt: skip
     return EvalTable(rows=rows, meta=meta)
