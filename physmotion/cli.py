@@ -301,8 +301,10 @@ def refine_cmd(
     steps: int = typer.Option(50, help="DDIM steps of the full schedule."),
     phys_scale: float | None = typer.Option(None, help="BioMoDiffuse models only: physics guidance weight "
                                             "(default: 1)."),
-    anchor_hz: float = typer.Option(1.0, help="Heading and root path slower than this (Hz) follow the input; "
-                                    "0: one yaw + shift for the whole clip."),
+    smooth_hz: float = typer.Option(4.0, help="Low-pass the input at this cut-off (Hz) before inversion and "
+                                    "fuse the result with it; 0: the paper's plain inversion."),
+    anchor_hz: float = typer.Option(1.0, help="Plain inversion only: heading and root path slower than this "
+                                    "(Hz) follow the input; 0: one yaw + shift for the whole clip."),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
     """Refine a motion by DDIM inversion and denoising (BioMoDiffuse Sec. 3.5; physics guidance with a
@@ -312,7 +314,7 @@ def refine_cmd(
     from physmotion.motion import Motion
 
     config = RefineConfig(strength=strength, steps=steps, text=text, phys_scale=phys_scale,
-                          anchor_hz=anchor_hz or None)
+                          smooth_hz=smooth_hz or None, anchor_hz=anchor_hz or None)
     config.check()
     if not path.is_file():
         raise PhysmotionError(f"{path}: no such file")

@@ -18,6 +18,14 @@ root is integrated from per-frame velocities, so small errors in them drift the 
 the input's (tens of centimetres over a clip); the slow part of the heading and of the ground-plane root
 path is therefore taken from the input (``anchor_hz``, a complementary filter: the model refines the fast
 part, where jitter lives, and the input keeps the slow part, where it has none).
+
+By default refine also treats the input as a noisy observation (``smooth_hz``): it is low-passed before
+inversion, the model's result is placed frame by frame onto the smoothed input (yaw + translation), and
+the two are averaged joint by joint with inverse-variance weights estimated from the motion itself: the
+smoothed input's noise from what the filter removed, the model's error from how far it lands from the
+smoothed input (a Wiener-style fusion of two estimates, as the data-consistency step of diffusion
+inverse solvers). The paper's plain inversion (``smooth_hz=None``) loses to the low-pass filter alone on
+jittery clips (docs/decisions.md: "refine fused with the smoothed input").
 Motions longer than the model's ``max_frames`` (196 frames, 9.8 s at 20 fps) are refused.
 """
 
@@ -28,7 +36,7 @@ from itertools import pairwise
 
 import numpy as np
 import torch
-from scipy.signal import butter, filtfilt
+from scipy.signal import butter, filtfilt, freqz
 
 from physmotion.conventions import FLOOR_SURFACE, FPS, MIN_FRAMES
 from physmotion.diffusion.model import MotionDiffusion
@@ -49,23 +57,27 @@ class RefineConfig:
     dataset's skeleton); steps: DDIM steps of the full schedule; cfg_scale: guidance of the denoising
     half; text: caption to condition on ("" = unconditional); phys_scale: physics guidance of a
     BioMoDiffuse model (None: the model's sampling default, Eq. 11's "forward diffusion with our physics
-    guidance"; other models have none); anchor_hz: the cut-off below which heading and root path follow
-    the input (None: only one yaw + translation for the whole clip; docs/decisions.md "refine keeps the
-    input's path")."""
+    guidance"; other models have none); smooth_hz: cut-off (Hz) of the low-pass applied to the input
+    before inversion, whose result is then fused with the model's (None: the paper's plain inversion;
+    docs/decisions.md "refine fused with the smoothed input"); anchor_hz: without smoothing, the cut-off
+    below which heading and root path follow the input (None: only one yaw + translation for the whole
+    clip; docs/decisions.md "refine keeps the input's path")."""
 
     strength: float = 0.3
     steps: int = 50
     cfg_scale: float = 2.5
     text: str = ""
     phys_scale: float | None = None
+    smooth_hz: float | None = 4.0
     anchor_hz: float | None = 1.0
 
     def check(self) -> None:
         if not (np.isfinite(self.strength) and 0.0 <= self.strength <= 1.0):
             raise PhysmotionError(f"strength must be in [0, 1], got {self.strength:g}")
-        hz = self.anchor_hz
-        if hz is not None and not (np.isfinite(hz) and 0.0 < hz < FPS / 2):
-            raise PhysmotionError(f"anchor_hz must be between 0 and {FPS / 2:g} (Nyquist), got {hz:g}")
+        for name in ("smooth_hz", "anchor_hz"):
+            hz = getattr(self, name)
+            if hz is not None and not (np.isfinite(hz) and 0.0 < hz < FPS / 2):
+                raise PhysmotionError(f"{name} must be between 0 and {FPS / 2:g} (Nyquist), got {hz:g}")
         if not 1 <= self.steps <= 1000:
             raise PhysmotionError(f"steps must be between 1 and 1000, got {self.steps}")
         SamplerConfig(cfg_scale=self.cfg_scale, phys_scale=self.phys_scale).check()  # the guidance scales
@@ -98,7 +110,8 @@ def refine(model: MotionDiffusion, joints: np.ndarray, fps: float, config: Refin
     """Refine a motion by DDIM inversion to ``strength`` and deterministic DDIM denoising back.
 
     joints: (T, 22, 3) metres, Y up, at ``fps``. Returns (T', 22, 3) float32 at 20 fps (T' = T for 20 fps
-    input), in the input's frame, on the dataset's uniform skeleton. Deterministic.
+    input), in the input's frame: on the dataset's uniform skeleton, or with ``smooth_hz`` the fusion of
+    the model's motion on it and the smoothed input. Deterministic.
     Raises PhysmotionError / ShapeError (one line) for NaN, a wrong shape, a length outside
     MIN_FRAMES..max_frames at 20 fps, or a strength outside [0, 1].
     """
@@ -106,15 +119,17 @@ def refine(model: MotionDiffusion, joints: np.ndarray, fps: float, config: Refin
     cfg.check()
     SamplerConfig(phys_scale=cfg.phys_scale).check_model(model)
     pos = check_motion(joints, fps, model)
+    k = cfg.inverted_steps
+    smooth = cfg.smooth_hz is not None and k > 0
+    src = low_pass(pos, cfg.smooth_hz) if smooth else pos
     dim = model.denoiser.feature_dim
-    feats = joints_to_features(pos, dim)  # T rows: the last one extrapolated (physdiff's convention)
+    feats = joints_to_features(src, dim)  # T rows: the last one extrapolated (physdiff's convention)
     if model.floor == FLOOR_SURFACE:  # a model that learned the soles on the floor sees the input so too
         lowest = recover_from_ric(feats.astype(np.float64))
         feats = raise_features(feats, surface_lift(lowest, body_from_joints(lowest)))
     # the input as the features hold it (canonical frame; the extrapolated frame can move the floor)
     canonical = recover_from_ric(feats.astype(np.float64))
-    rot, shift = _yaw_fit(canonical, pos)
-    k = cfg.inverted_steps
+    rot, shift = _yaw_fit(canonical, src)
     if not k:  # strength 0: nothing to refine, the input as the features hold it, back in its frame
         return (canonical @ rot.T + shift).astype(np.float32)
     device = next(model.net.parameters()).device
@@ -125,9 +140,57 @@ def refine(model: MotionDiffusion, joints: np.ndarray, fps: float, config: Refin
     x = _denoise(x, guide, k, cfg.steps, cfg.cfg_scale, model.diffusion)
     out = recover_from_ric(model.normalizer.denormalize(x[0].float().cpu().numpy()).astype(np.float64))
     out = out @ rot.T + shift
-    if cfg.anchor_hz is not None:
+    if smooth:
+        out = fuse(out, src, pos, cfg.smooth_hz)
+    elif cfg.anchor_hz is not None:
         out = _anchor_path(out, pos, cfg.anchor_hz)
     return out.astype(np.float32)
+
+
+def low_pass(joints: np.ndarray, cutoff_hz: float, fps: float = FPS) -> np.ndarray:
+    """(T, 22, 3) -> the same, zero-phase 4th-order Butterworth low-pass along time (scipy's filtfilt):
+    no delay, and the usual smoother of captured trajectories (the baseline of results/refine.md)."""
+    b, a = butter(4, cutoff_hz / (fps / 2))
+    return filtfilt(b, a, joints, axis=0, padlen=min(3 * max(len(a), len(b)), len(joints) - 1))
+
+
+def fuse(model_out: np.ndarray, smooth: np.ndarray, raw: np.ndarray, cutoff_hz: float,
+         fps: float = FPS) -> np.ndarray:  # fmt: skip
+    """Inverse-variance fusion of the model's motion with the smoothed input, all (T, 22, 3).
+
+    ``model_out`` is placed frame by frame onto ``smooth`` (yaw + translation, least squares), then
+    ``w * placed + (1 - w) * smooth`` with w = v_s / max(d^2, v_s): v_s is the smoothed input's noise
+    variance (the white noise that ``raw - smooth`` implies, times the share of it the filter passes) and
+    d^2 the mean squared distance of the placed motion from ``smooth``, which is v_s plus the model's own
+    error variance if the two errors are independent. A clean input gives w near 0 (the input stays), a
+    jittery one hands more of the motion to the model.
+    """
+    placed = _place_frames(model_out, smooth)
+    passed, removed = _noise_shares(cutoff_hz, fps)
+    v_s = float(np.mean((raw - smooth) ** 2)) / removed * passed
+    d2 = float(np.mean((placed - smooth) ** 2))
+    w = v_s / d2 if d2 > v_s else 1.0
+    return w * placed + (1.0 - w) * smooth
+
+
+def _noise_shares(cutoff_hz: float, fps: float) -> tuple[float, float]:
+    """Of white noise, the variance shares that :func:`low_pass` keeps and removes (its zero-phase gain
+    |H|^2 averaged over frequency: mean |H|^4 and mean (1 - |H|^2)^2)."""
+    b, a = butter(4, cutoff_hz / (fps / 2))
+    gain = np.abs(freqz(b, a, worN=4096)[1]) ** 2
+    return float(np.mean(gain**2)), float(np.mean((1.0 - gain) ** 2))
+
+
+def _place_frames(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """``src`` (T, 22, 3) turned about Y and shifted, each frame on its own, to best match ``dst``."""
+    a = src - src.mean(axis=1, keepdims=True)
+    b = dst - dst.mean(axis=1, keepdims=True)
+    # per frame, the angle of :func:`_yaw_fit`
+    theta = np.arctan2(np.sum(a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2], axis=1),
+                       np.sum(a[..., 0] * b[..., 0] + a[..., 2] * b[..., 2], axis=1))[:, None]  # fmt: skip
+    c, s = np.cos(theta), np.sin(theta)
+    turned = np.stack([c * a[..., 0] + s * a[..., 2], a[..., 1], -s * a[..., 0] + c * a[..., 2]], axis=-1)
+    return turned + dst.mean(axis=1, keepdims=True)
 
 
 class _Guide:
