@@ -3,7 +3,8 @@ model: one table from one run.
 
 Usage: python bench/physdiff_quality.py [--model DIR] [--prompts 32] [--seeds 0,1,2] [--json FILE]
        python bench/physdiff_quality.py --set new [--model DIR] [--seeds 0] [--json FILE]
-       (either with --fine-step: every projection at 1/720 s, as ``generate --fine-step``)
+       (either with --fine-step: every projection at 1/720 s, as ``generate --fine-step``; or --tau M: the
+       generation P's reset threshold, 0.15 m in the sampling preset)
 (--json also writes every mode's metrics per seed, e.g. results/physdiff_quality.json, which the README
 quotes and tests/test_results.py checks it against.)
 Rows: none (as sampled), none+floor (each motion moved vertically by the constant shift that leaves it the
@@ -34,6 +35,7 @@ from physmotion.eval.physics_modes import compare_modes
 from physmotion.eval.prompts import NEW_PROMPTS, PHYSICS_PROMPTS
 from physmotion.generate import GenerateConfig
 from physmotion.motion import write_atomic
+from physmotion.physics.projection import ProjectionConfig
 
 MODES = ("none", "none+floor", "post:1", "post:4", "physdiff:end:4,space:1")
 NEW_SET_MODES = ("none", "none+floor", "post:1", "physdiff:end:4,space:1", "morph")
@@ -50,10 +52,14 @@ def main() -> None:
                         help="physics: the 32 prompts in our captions' words; new: the unseen prompts by category")
     parser.add_argument("--fine-step", action="store_true",
                         help="every projection at 1/720 s (generate --fine-step)")
+    parser.add_argument("--tau", type=float, default=None,
+                        help="the generation P's reset threshold in metres (default: the sampling preset's)")
     args = parser.parse_args()
     seeds = [int(s) for s in args.seeds.split(",")]
     model = MotionDiffusion.load(args.model)
     base = GenerateConfig().at_fine_step() if args.fine_step else GenerateConfig()
+    if args.tau is not None:
+        base = replace(base, projection=replace(base.projection, tau=args.tau))
     if args.set == "new":
         _new_prompts(model, seeds, args.json, base)
         return
@@ -64,13 +70,13 @@ def main() -> None:
     for col in ("mode", "Penetrate", "Float", "Skate", "Phys-Err", "vs none", "vs none+floor",
                 "per seed (vs none+floor)", "no fall", "reset", "resets", "s/motion"):
         table.add_column(col, justify="left" if col == "mode" else "right")
-    base = {m: np.mean([r[m]["phys_err"] for r in runs]) for m in ("none", "none+floor")}
+    ref = {m: np.mean([r[m]["phys_err"] for r in runs]) for m in ("none", "none+floor")}
     for mode in MODES:
         mean = {k: float(np.mean([r[mode].get(k, np.nan) for r in runs]))
                 for k in (*COLUMNS, "tracked", "reset_rate", "resets", "seconds_per_motion")}
         per_seed = "/".join(f"{100 * (r[mode]['phys_err'] / r['none+floor']['phys_err'] - 1):+.1f}"
                             for r in runs)
-        changes = [f"{100 * (mean['phys_err'] / base[b] - 1):+.1f}%" for b in ("none", "none+floor")]
+        changes = [f"{100 * (mean['phys_err'] / ref[b] - 1):+.1f}%" for b in ("none", "none+floor")]
         projected = mode.startswith(("post", "physdiff"))
         falls = [f"{100 * mean['tracked']:.0f}%", f"{100 * mean['reset_rate']:.0f}%", f"{mean['resets']:.2f}"]
         table.add_row(mode, *(f"{mean[k]:.2f}" for k in COLUMNS), *changes, per_seed,
@@ -78,15 +84,19 @@ def main() -> None:
     Console(width=160, emoji=False).print(table)
     if args.json:
         meta = {"prompts": len(prompts), "seconds": base.seconds, "seeds": seeds,
-                "model_steps": model.info.get("steps"), "sim_dt": base.projection.humanoid.sim_dt}
+                "model_steps": model.info.get("steps"), "sim_dt": base.projection.humanoid.sim_dt,
+                "tau": base.projection.tau}
         runs = [{m: {k: (None if np.isnan(v) else v) for k, v in row.items()} for m, row in run.items()}
                 for run in runs]  # strict JSON: no NaN (the unprojected rows have no fall counts)
         write_atomic(args.json, lambda f: f.write(json.dumps({"meta": meta, "runs": runs}, indent=2)), "w")
 
 
 def _step(base: GenerateConfig) -> str:
-    """The projection's simulation step, for a table title."""
-    return f", P at 1/{round(1 / base.projection.humanoid.sim_dt)} s"
+    """The projection's simulation step (and its reset threshold where it is not the preset's), for a
+    table title."""
+    tau = base.projection.tau
+    reset = "" if tau == ProjectionConfig.sampling().tau else f", reset at {tau:g} m"
+    return f", P at 1/{round(1 / base.projection.humanoid.sim_dt)} s{reset}"
 
 
 def _new_prompts(model: MotionDiffusion, seeds: list[int], json_path: str | None, base: GenerateConfig) -> None:
@@ -116,7 +126,7 @@ def _new_prompts(model: MotionDiffusion, seeds: list[int], json_path: str | None
                        for run in cat_runs] for cat, cat_runs in runs.items()}  # fmt: skip
         meta = {"set": "new", "prompts": {c: list(p) for c, p in NEW_PROMPTS.items()}, "seeds": seeds,
                 "model_steps": model.info.get("steps"), "model_info": model.info.get("morph", {}),
-                "sim_dt": base.projection.humanoid.sim_dt}
+                "sim_dt": base.projection.humanoid.sim_dt, "tau": base.projection.tau}
         write_atomic(json_path, lambda f: f.write(json.dumps({"meta": meta, "runs": clean}, indent=2)), "w")
 
 
