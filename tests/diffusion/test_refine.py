@@ -154,6 +154,9 @@ def test_cli_writes_licence_and_refuses_missing(tmp_path, clean):
     motion = Motion.load(out)
     assert motion.joints.shape == (60, 22, 3)
     assert motion.licence_tag == MotionDiffusion.load().licence_tag  # the shipped model's "NC" wins
+    res = run("refine", src, "-o", tmp_path / "plain.npz", "--strength", "0.1", "--smooth-hz", "0")
+    assert res.returncode == 0, res.stderr  # the paper's inversion alone: another motion
+    assert not np.allclose(Motion.load(tmp_path / "plain.npz").joints, motion.joints, atol=1e-3)
     missing = tmp_path / "missing.npz"
     res = run("refine", missing, "-o", tmp_path / "x.npz")
     assert res.returncode != 0
