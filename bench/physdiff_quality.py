@@ -35,7 +35,6 @@ from physmotion.eval.physics_modes import compare_modes
 from physmotion.eval.prompts import NEW_PROMPTS, PHYSICS_PROMPTS
 from physmotion.generate import GenerateConfig
 from physmotion.motion import write_atomic
-from physmotion.physics.projection import ProjectionConfig
 
 MODES = ("none", "none+floor", "post:1", "post:4", "physdiff:end:4,space:1")
 NEW_SET_MODES = ("none", "none+floor", "post:1", "physdiff:end:4,space:1", "morph")
@@ -92,11 +91,9 @@ def main() -> None:
 
 
 def _step(base: GenerateConfig) -> str:
-    """The projection's simulation step (and its reset threshold where it is not the preset's), for a
-    table title."""
-    tau = base.projection.tau
-    reset = "" if tau == ProjectionConfig.sampling().tau else f", reset at {tau:g} m"
-    return f", P at 1/{round(1 / base.projection.humanoid.sim_dt)} s{reset}"
+    """The projection's simulation step and reset threshold, for a table title."""
+    p = base.projection
+    return f", P at 1/{round(1 / p.humanoid.sim_dt)} s, reset at {p.tau:g} m"
 
 
 def _new_prompts(model: MotionDiffusion, seeds: list[int], json_path: str | None, base: GenerateConfig) -> None:
@@ -104,8 +101,7 @@ def _new_prompts(model: MotionDiffusion, seeds: list[int], json_path: str | None
     runs = {cat: [compare_modes(model, list(prompts), NEW_SET_MODES, replace(base, seed=seed)) for seed in seeds]
             for cat, prompts in NEW_PROMPTS.items()}  # fmt: skip
     table = Table(title=f"unseen prompts ({sum(map(len, NEW_PROMPTS.values()))}), 6 s each{_step(base)}, "
-                  f"seeds "
-                  f"{','.join(map(str, seeds))}, model steps {model.info.get('steps')}")  # fmt: skip
+                  f"seeds {','.join(map(str, seeds))}, model steps {model.info.get('steps')}")  # fmt: skip
     for col in ("category", "mode", "Penetrate", "Float", "Skate", "Phys-Err", "vs none", "vs none+floor",
                 "reset", "imitation failed", "s/motion"):
         table.add_column(col, justify="left" if col in ("category", "mode") else "right")

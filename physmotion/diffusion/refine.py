@@ -185,9 +185,7 @@ def _place_frames(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     """``src`` (T, 22, 3) turned about Y and shifted, each frame on its own, to best match ``dst``."""
     a = src - src.mean(axis=1, keepdims=True)
     b = dst - dst.mean(axis=1, keepdims=True)
-    # per frame, the angle of :func:`_yaw_fit`
-    theta = np.arctan2(np.sum(a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2], axis=1),
-                       np.sum(a[..., 0] * b[..., 0] + a[..., 2] * b[..., 2], axis=1))[:, None]  # fmt: skip
+    theta = _best_yaw(a, b)[:, None]  # (T, 1)
     c, s = np.cos(theta), np.sin(theta)
     turned = np.stack([c * a[..., 0] + s * a[..., 2], a[..., 1], -s * a[..., 0] + c * a[..., 2]], axis=-1)
     return turned + dst.mean(axis=1, keepdims=True)
@@ -284,9 +282,16 @@ def _yaw_fit(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rotation about Y (3, 3) and shift (3,) minimising sum |R src + s - dst|^2 over frames and joints."""
     a = src.reshape(-1, 3) - src.reshape(-1, 3).mean(0)
     b = dst.reshape(-1, 3) - dst.reshape(-1, 3).mean(0)
-    # R = [[c, 0, s], [0, 1, 0], [-s, 0, c]]: maximise c * sum(ax bx + az bz) + s * sum(az bx - ax bz)
-    theta = np.arctan2(np.sum(a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]), np.sum(a[:, 0] * b[:, 0] + a[:, 2] * b[:, 2]))
+    theta = _best_yaw(a, b)
     c, s = np.cos(theta), np.sin(theta)
     rot = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
     shift = dst.reshape(-1, 3).mean(0) - src.reshape(-1, 3).mean(0) @ rot.T
     return rot, shift
+
+
+def _best_yaw(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The angle about Y that best turns the centred points ``a`` onto ``b`` (..., P, 3), over the P axis.
+
+    R = [[c, 0, s], [0, 1, 0], [-s, 0, c]]: maximise c * sum(ax bx + az bz) + s * sum(az bx - ax bz)."""
+    return np.arctan2(np.sum(a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2], axis=-1),
+                      np.sum(a[..., 0] * b[..., 0] + a[..., 2] * b[..., 2], axis=-1))  # fmt: skip
