@@ -1,12 +1,15 @@
-"""The figures README.md, results/README.md and the model card quote are the ones results/*.json hold.
+"""The figures the docs quote are the ones results/*.json hold.
 
-The JSON files are written by the commands results/README.md names (``physmotion evaluate``,
-``bench/physdiff_quality.py --json``, ``scripts/schedule_study.py``); a re-run that changes a figure
-fails here until the docs say the new one.
+README.md's results table is docs/make_readme_table.py's output; docs/results.md, results/README.md and
+the model cards quote figures in their text. The JSON files are written by the commands results/README.md
+names (``physmotion evaluate``, ``bench/physdiff_quality.py --json``, ``scripts/schedule_study.py``, ...);
+a re-run that changes a figure fails here until the docs say the new one. docs/decisions/ is the dated
+record of experiments (many from one-off scripts) and is not checked here.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import re
 from pathlib import Path
@@ -20,6 +23,11 @@ PHYSDIFF = "physdiff:end:4,space:1"
 DOCS = {
     "README": ROOT / "README.md",
     "results": RESULTS / "README.md",
+    "docs results": ROOT / "docs" / "results.md",
+    "limitations": ROOT / "docs" / "limitations.md",
+    "cli": ROOT / "docs" / "cli.md",
+    "architecture": ROOT / "docs" / "architecture.md",
+    "decisions": ROOT / "docs" / "decisions" / "README.md",
     "model card": ROOT / "physmotion" / "models" / "default" / "README.md",
     "morph card": ROOT / "physmotion" / "models" / "morph" / "README.md",
 }
@@ -129,6 +137,20 @@ def dynamic_quotes() -> list[str]:
     ]
 
 
+def dynamic_doc_quotes() -> list[str]:
+    """docs/results.md quotes dynamic_quotes and the clip counts of each category."""
+    configs = _load("projection_dynamic.json")["configs"]
+    now, fine_walk = configs["default"], configs["default at 1/720 s"]["walk"]
+    fails = round((1 - fine_walk["success"]) * fine_walk["clips"])
+    return dynamic_quotes() + [
+        f"all {now['all']['clips']} bundled clips",
+        f"Walks and runs ({now['walks+runs']['clips']} clips)",
+        f"The {now['run']['clips']} runs",
+        f"The {now['jump']['clips']} jumps",
+        f"{fails} of the {fine_walk['clips']} walks fail",
+    ]
+
+
 def _prompts_mean(runs: dict, mode: str, key: str = "phys_err", seed: int | None = None) -> float:
     """A bench/physdiff_quality.py figure (category -> one row per seed) averaged over the categories in
     ``runs`` and over the seeds, or at one ``seed``."""
@@ -191,22 +213,52 @@ def biomodiffuse_quotes() -> list[str]:
     ]
 
 
+def _refine_rows(name: str) -> dict:
+    """A refine table (scripts/refine_table.py) by setting: "2 cm | refine 0.3" -> its row."""
+    return {r["setting"]: r for r in _load(name)["rows"]}
+
+
+def refine_quotes() -> list[str]:
+    """Refine against the noisy input and the low-pass filters (results/refine.json, refine_biomo.json)."""
+    rows, biomo = _refine_rows("refine.json"), _refine_rows("refine_biomo.json")
+
+    def err(row: dict) -> str:
+        return f"{row['mpjpe_mm']:.1f} mm and {row['accel_err']:.2f} m/s^2"
+
+    refined = rows["2 cm | refine 0.3"]
+    return [
+        f"MPJPE {refined['mpjpe_mm']:.1f} mm and acceleration error {refined['accel_err']:.2f} m/s^2",
+        f"4 Hz low-pass filter's {err(rows['2 cm | low-pass 4 Hz'])}",
+        f"noisy input's {err(rows['2 cm | noisy input'])}",
+        f"at {rows['2 cm | refine 0.3 plain']['mpjpe_mm']:.1f} mm",
+        f"MPJPE is {rows['1 cm | refine 0.3']['mpjpe_mm']:.1f} mm against the filter's "
+        f"{rows['1 cm | low-pass 4 Hz']['mpjpe_mm']:.1f} mm",
+        f"({rows['2 cm | low-pass 3 Hz']['accel_err']:.2f} m/s^2 at 2 cm)",
+        f"{err(biomo['2 cm | refine 0.3'])} at 2 cm",
+    ]
+
+
 QUOTES = {  # which doc quotes which result file
-    ("README", "evaluate"): evaluate_quotes,
-    ("README", "bench"): bench_quotes,
+    ("docs results", "evaluate"): evaluate_quotes,
+    ("docs results", "bench"): bench_quotes,
+    ("docs results", "schedule"): schedule_quotes,
+    ("docs results", "morph"): morph_quotes,
+    ("docs results", "dynamic"): dynamic_doc_quotes,
+    ("docs results", "new prompts"): new_prompts_quotes,
+    ("docs results", "new prompts fine"): new_prompts_fine_quotes,
+    ("docs results", "new prompts morph"): new_prompts_morph_quotes,
+    ("docs results", "biomodiffuse"): biomodiffuse_quotes,
+    ("docs results", "refine"): refine_quotes,
     ("results", "evaluate"): evaluate_quotes,
     ("results", "schedule"): schedule_quotes,
     ("model card", "evaluate"): evaluate_quotes,
     ("model card", "bench"): bench_quotes,
-    ("README", "morph"): morph_quotes,
     ("morph card", "morph"): morph_quotes,
-    ("README", "dynamic"): dynamic_quotes,
     ("results", "dynamic"): dynamic_quotes,
     ("results", "new prompts"): new_prompts_quotes,
     ("results", "new prompts morph"): new_prompts_morph_quotes,
     ("results", "new prompts fine"): new_prompts_fine_quotes,
     ("morph card", "new prompts morph"): new_prompts_morph_quotes,
-    ("README", "biomodiffuse"): biomodiffuse_quotes,
     ("results", "biomodiffuse"): biomodiffuse_quotes,
 }
 
@@ -218,7 +270,7 @@ def _section(text: str, source: str) -> str:
              "dynamic": "projection_dynamic",
              "new prompts": "new_prompts_default", "new prompts morph": "new_prompts_morph",
              "new prompts fine": "new_prompts_fine",
-             "biomodiffuse": "results/biomodiffuse"}
+             "biomodiffuse": "results/biomodiffuse", "refine": "results/refine"}
     marker = files[source]
     return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
 
@@ -230,6 +282,38 @@ def test_docs_quote_the_results_files(doc: str, source: str) -> None:
     flat = " ".join(text.split())
     missing = [q for q in QUOTES[doc, source]() if q not in flat]
     assert not missing, f"{doc} does not quote these {source} figures: {missing}"
+
+
+def test_readme_table_is_the_scripts_output() -> None:
+    """README.md's results table is docs/make_readme_table.py's output for results/evaluate_default.json,
+    between its two marker comments."""
+    spec = importlib.util.spec_from_file_location("make_readme_table", ROOT / "docs" / "make_readme_table.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    text = DOCS["README"].read_text()
+    found = re.search(r"<!-- table: python docs/make_readme_table.py[^>]*-->\n(.*?)\n<!-- end table -->",
+                      text, re.S)
+    assert found, "README.md has no table between its '<!-- table: ...' and '<!-- end table -->' comments"
+    assert found.group(1) == script.table(), "README.md's table is not docs/make_readme_table.py's output"
+
+
+def test_refine_claims_hold() -> None:
+    """docs/results.md: a 3 Hz filter has less acceleration error than refine at every level, and refine beats
+    the 4 Hz filter and the noisy input on both errors at 2 cm."""
+    rows = _refine_rows("refine.json")
+    for level in ("1 cm", "2 cm", "4 cm"):
+        assert rows[f"{level} | low-pass 3 Hz"]["accel_err"] < rows[f"{level} | refine 0.3"]["accel_err"]
+    for key in ("mpjpe_mm", "accel_err"):
+        for other in ("low-pass 4 Hz", "noisy input"):
+            assert rows["2 cm | refine 0.3"][key] < rows[f"2 cm | {other}"][key]
+
+
+def test_plain_samples_about_twice_as_jerky() -> None:
+    """docs/limitations.md: "Plain samples are about twice as jerky as captured motion"."""
+    rows = _load("evaluate_default.json")["rows"]
+    ratio = rows["none"]["smoothness"]["mean"] / rows["real"]["smoothness"]["mean"]
+    assert 1.75 <= ratio < 2.5, ratio
+    assert "about twice as jerky as captured motion" in " ".join(DOCS["limitations"].read_text().split())
 
 
 def test_real_motion_stands_on_the_floor_in_the_results() -> None:

@@ -1,0 +1,57 @@
+"""Print the README's results table from a committed results file (default: results/evaluate_default.json).
+
+    python docs/make_readme_table.py [results/evaluate_default.json]
+
+The README holds this script's output verbatim; tests/test_results.py fails when the two differ, so a
+re-run of `physmotion evaluate -o results/evaluate_default` is followed by pasting the new table.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT = ROOT / "results" / "evaluate_default.json"
+
+# Each row of the file, in plain words: (row key, what the motion is).
+ROWS = (
+    ("real", "captured motion (the test split itself)"),
+    ("none", "generated, no physics (`none`)"),
+    ("none+floor", "generated, then moved up or down onto the floor (`none+floor`)"),
+    ("post:1", "generated, then one simulation (`post:1`)"),
+    ("post:4", "generated, then four simulations (`post:4`)"),
+    ("physdiff:end:4,space:1", "**PhysDiff: simulations inside generation (`physdiff`, the default)**"),
+)
+
+
+def _cell(row: dict, key: str, fmt: str) -> str:
+    return f"{row[key]['mean']:{fmt}}"
+
+
+def table(path: Path = DEFAULT) -> str:
+    """The markdown table of one `physmotion evaluate` results file."""
+    result = json.loads(Path(path).read_text())
+    rows = result["rows"]
+    lines = [
+        "| motion | physical error, mm | sinking / floating / sliding, mm | realism: FID "
+        "| matches its text: R@3 | outputs with a reset |",
+        "|---|---|---|---|---|---|",
+    ]
+    for key, words in ROWS:
+        row = rows[key]
+        resets = f"{100 * row['reset_rate']['mean']:.0f} %" if "reset_rate" in row else "-"
+        parts = " / ".join(_cell(row, k, ".1f") for k in ("penetrate", "float", "skate"))
+        cells = (_cell(row, "phys_err", ".1f"), parts, _cell(row, "FID", ".3f"), _cell(row, "R@3", ".2f"),
+                 resets)
+        lines.append(f"| {words} | " + " | ".join(cells) + " |")
+    meta = result["meta"]
+    lines.append("")
+    lines.append(f"{meta['motions']} test motions x {meta['repeats']} repeats, the shipped model "
+                 f"(step {meta['model_steps']}), `{Path(path).relative_to(ROOT).as_posix()}`.")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    print(table(Path(sys.argv[1]).resolve() if len(sys.argv) > 1 else DEFAULT))
