@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from physmotion.errors import MotionFormatError
+from physmotion.errors import MotionFormatError, PhysmotionWarning
 from physmotion.io.rigs import RigMotion, closure, euler_to_matrix, remap_parents
 from physmotion.motion import write_atomic
 
@@ -34,8 +34,19 @@ whereas heading (Y), knee and hip flexion (X) and elbow flexion often do; so Z s
 _AXES = {"X": 0, "Y": 1, "Z": 2}
 
 
+class Latin1Warning(PhysmotionWarning):
+    """A motion file that is not UTF-8 and was read as Latin-1; ``path`` names it."""
+
+    def __init__(self, message: str, path: Path) -> None:
+        super().__init__(message)
+        self.path = path
+
+
 def read_text(path: str | Path, kind: str) -> str:
-    """The text of a motion file, or a one-line MotionFormatError (missing, a folder, not UTF-8)."""
+    """The text of a motion file, or a one-line MotionFormatError (missing, a folder, binary, empty).
+
+    UTF-8 (a BOM is dropped); a file that is not UTF-8 is read as Latin-1, with a :class:`Latin1Warning`.
+    """
     path = Path(path)
     if not path.exists():
         raise MotionFormatError(f"{path}: no such file")
@@ -52,8 +63,10 @@ def read_text(path: str | Path, kind: str) -> str:
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        where = f"bytes that are not UTF-8 at offset {exc.start}"
-        raise MotionFormatError(f"{path}: not a {kind} text file ({where})") from None
+        # Real files carry Latin-1 / cp1252 in comments and names (HDM05's headers); every byte decodes.
+        message = f"{path}: not UTF-8 (byte 0x{data[exc.start]:02x} at offset {exc.start}): read as Latin-1"
+        warnings.warn(Latin1Warning(message, path), stacklevel=2)
+        return data.decode("latin-1")
 
 
 def read_bvh(path: str | Path, keep: set[str] | None = None) -> RigMotion:

@@ -14,8 +14,10 @@ Steps, in order, and why in that order:
    ``rotations`` and ``offsets`` consistent (as HumanML3D's uniform-skeleton step does). The pelvis
    frame is fixed by the hips first (:func:`_rigid_pelvis`), so legs and feet stay exact and the
    misfit sits at spine1 (measured: :attr:`Canonical.fit_mean`, ``fit_max``).
-5. Place: the lowest foot joint of frame 0 on y = 0, the root's XZ at the origin at frame 0, the
-   body facing +Z at frame 0 (:func:`skeleton.facing_direction`; its left is then +X).
+5. Place: the root's XZ at the origin at frame 0, the body facing +Z at frame 0
+   (:func:`skeleton.facing_direction`; its left is then +X), and the stance soles over the whole clip
+   on y = 0, the physical metrics' floor (:func:`physmotion.io.floor.ground`; frame 0's lowest foot
+   joint, the rule before, left captured clips 2-3 cm in the floor and moved exported motions).
 """
 
 from __future__ import annotations
@@ -27,9 +29,9 @@ from scipy.spatial.transform import Rotation
 
 from physmotion.conventions import FPS
 from physmotion.errors import MotionFormatError, PhysmotionError
+from physmotion.io.floor import Grounding, ground
 from physmotion.io.rigs import RigMotion, RigTable
 from physmotion.skeleton import (
-    FOOT_JOINTS,
     JOINT_INDEX,
     check_bone_lengths,
     facing_direction,
@@ -65,12 +67,13 @@ _TPOSE_JUMP_RATIO = 5.0  # ... and that many times the displacement frame 1 -> 2
 class Canonical:
     """A motion in the project's conventions.
 
-    joints: (T, 22, 3) float64 metres, Y up, FPS, floor y = 0, root XZ at the origin and facing +Z
-    at frame 0; equal to FK of (rotations, joints[:, 0], offsets).
+    joints: (T, 22, 3) float64 metres, Y up, FPS, stance soles on y = 0 (:mod:`physmotion.io.floor`),
+    root XZ at the origin and facing +Z at frame 0; equal to FK of (rotations, joints[:, 0], offsets).
     rotations: (T, 22, 3, 3) local rotations; offsets: (22, 3) rest offsets, metres.
     dropped_tpose: whether a T-pose frame 0 was detected and removed.
     fit_mean, fit_max: (22,) mean and largest distance (m) per joint between the mapped rig point
     and the fitted 22-joint body (0 where the rig has SMPL's rigid parts, e.g. Bandai).
+    grounding: how the motion was put on the floor.
     """
 
     joints: np.ndarray
@@ -79,6 +82,7 @@ class Canonical:
     dropped_tpose: bool
     fit_mean: np.ndarray
     fit_max: np.ndarray
+    grounding: Grounding
 
 
 def canonicalize(
@@ -125,7 +129,10 @@ def canonicalize(
     joints = forward_kinematics(rotations, root, offsets)
     misfit = np.linalg.norm(joints - raw, axis=-1)
     joints, rotations = _place(joints, rotations)
-    return Canonical(joints, rotations, offsets, bool(dropped), misfit.mean(axis=0), misfit.max(axis=0))
+    joints, grounding = ground(joints, FPS)  # a vertical shift: rotations and offsets keep
+    return Canonical(
+        joints, rotations, offsets, bool(dropped), misfit.mean(axis=0), misfit.max(axis=0), grounding
+    )
 
 
 def resample(rig: RigMotion, fps: float, target_fps: float = FPS) -> RigMotion:
@@ -257,11 +264,12 @@ def _rigid_pelvis(joints: np.ndarray) -> np.ndarray:
 
 
 def _place(joints: np.ndarray, rotations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Floor, origin and facing at frame 0 (a rigid motion of the world, applied to the root too)."""
+    """Origin and facing at frame 0 (a rigid motion of the world, applied to the root too); the floor
+    is :func:`physmotion.io.floor.ground`'s."""
     forward = facing_direction(joints[0])
     yaw = np.arctan2(forward[0], forward[2])  # angle from +Z to forward, about +Y
     turn = Rotation.from_euler("y", -yaw).as_matrix()
-    shift = np.array([joints[0, 0, 0], joints[0, list(FOOT_JOINTS), 1].min(), joints[0, 0, 2]])
+    shift = np.array([joints[0, 0, 0], 0.0, joints[0, 0, 2]])
     placed = (joints - shift) @ turn.T
     rotations = rotations.copy()
     rotations[:, 0] = turn @ rotations[:, 0]

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import csv
-from collections.abc import Mapping
+import warnings
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TypeVar
@@ -12,8 +14,9 @@ import numpy as np
 
 from physmotion.errors import MotionFormatError, PhysmotionError
 from physmotion.io.amc import read_amc, read_asf
-from physmotion.io.bvh import bvh_joint_names, read_bvh
+from physmotion.io.bvh import Latin1Warning, bvh_joint_names, read_bvh
 from physmotion.io.canonical import canonicalize
+from physmotion.io.floor import Grounding
 from physmotion.io.mapping import load_mapping
 from physmotion.io.rigs import RIGS, JointSource, RigMotion, RigTable, parse_units, table_from_mapping
 from physmotion.motion import Motion
@@ -47,8 +50,8 @@ class ClipInfo:
 @dataclass(frozen=True)
 class ImportReport:
     """What an import did: the rig table used, source frames and rate, whether a T-pose frame 0 was
-    dropped, and the per-joint fit of the 22-joint body to the rig's points ((22,) metres, see
-    :class:`~physmotion.io.canonical.Canonical`)."""
+    dropped, the per-joint fit of the 22-joint body to the rig's points ((22,) metres, see
+    :class:`~physmotion.io.canonical.Canonical`) and how the motion was put on the floor."""
 
     rig: str
     source_frames: int
@@ -56,6 +59,7 @@ class ImportReport:
     dropped_tpose: bool
     fit_mean: np.ndarray
     fit_max: np.ndarray
+    grounding: Grounding
 
 
 def load_manifest(mocap_dir: str | Path) -> list[ClipInfo]:
@@ -109,7 +113,8 @@ def import_clip(
 ) -> Motion:
     """Import a manifest clip, or a bare BVH / AMC file, as a canonical :class:`Motion`.
 
-    Motion: joints (T, 22, 3) float32 at 20 fps, metres, Y up, floor y = 0, facing +Z at frame 0;
+    Motion: joints (T, 22, 3) float32 at 20 fps, metres, Y up, the stance soles on the floor y = 0
+    (:mod:`physmotion.io.floor`), root over the origin and facing +Z at frame 0;
     rotations and offsets from the 22-joint IK (FK of them gives ``joints``); texts, licence_tag
     and source (clip id) from the manifest. Each setting comes from the first of these that has it:
     units: the argument, the rig table, the ASF file, the manifest; up axis: the argument, the rig
@@ -147,7 +152,48 @@ def import_clip_with_report(
     asf: str | Path | None = None,
     drop_tpose: bool = True,
 ) -> tuple[Motion, ImportReport]:
-    """:func:`import_clip`, also returning an :class:`ImportReport`."""
+    """:func:`import_clip`, also returning an :class:`ImportReport`.
+
+    Files read as Latin-1 (not UTF-8) are named in one :class:`~physmotion.io.bvh.Latin1Warning`."""
+    with _one_latin1_warning():
+        return _import(info_or_path, rig, fps, up_axis, units, mapping, asf, drop_tpose)
+
+
+@contextmanager
+def _one_latin1_warning() -> Iterator[None]:
+    """Gather the Latin-1 warnings of one import (an AMC and its ASF, a file read twice) into one line,
+    emitted also when the import fails; other warnings pass through unchanged."""
+    caught: list[warnings.WarningMessage] = []
+    try:
+        with warnings.catch_warnings(record=True) as record:
+            warnings.simplefilter("always")
+            try:
+                yield
+            finally:
+                caught = list(record or [])
+    finally:
+        latin1 = [w.message for w in caught if isinstance(w.message, Latin1Warning)]
+        for w in caught:
+            if not isinstance(w.message, Latin1Warning):
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        paths = list(dict.fromkeys(m.path for m in latin1))
+        if len(paths) == 1:
+            warnings.warn(latin1[0], stacklevel=4)
+        elif paths:
+            names = ", ".join(str(p) for p in paths)
+            warnings.warn(Latin1Warning(f"{names}: not UTF-8: read as Latin-1", paths[0]), stacklevel=4)
+
+
+def _import(
+    info_or_path: ClipInfo | str | Path,
+    rig: str | RigTable | None,
+    fps: float | None,
+    up_axis: str | None,
+    units: str | float | None,
+    mapping: Mapping[str, JointSource] | str | Path | None,
+    asf: str | Path | None,
+    drop_tpose: bool,
+) -> tuple[Motion, ImportReport]:
     info = info_or_path if isinstance(info_or_path, ClipInfo) else None
     path = Path(info.path if info else info_or_path)
     try:
@@ -196,7 +242,8 @@ def import_clip_with_report(
             message = f"{path}: {message}"
         raise type(exc)(message) from None
     report = ImportReport(
-        table.name, motion.num_frames, float(rate), canon.dropped_tpose, canon.fit_mean, canon.fit_max
+        table.name, motion.num_frames, float(rate), canon.dropped_tpose, canon.fit_mean, canon.fit_max,
+        canon.grounding,
     )
     return result, report
 

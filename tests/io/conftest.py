@@ -20,3 +20,41 @@ def clip(manifest: list[ClipInfo]) -> Callable[[str], ClipInfo]:
     """Look a manifest row up by clip id."""
     by_id = {c.clip: c for c in manifest}
     return by_id.__getitem__
+
+
+HDM05_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "hdm05"
+
+
+@pytest.fixture(scope="session")
+def hdm05_dir() -> Path:
+    """``../shared/data/hdm05`` (HDM05's ASF/AMC clips, Latin-1 headers); a failure when missing."""
+    if not (HDM05_DIR / "manifest.csv").is_file():
+        pytest.fail(f"the HDM05 data is missing: expected {HDM05_DIR.resolve()}/manifest.csv")
+    return HDM05_DIR.resolve()
+
+
+@pytest.fixture(scope="session")
+def hdm05_manifest(hdm05_dir: Path) -> list[ClipInfo]:
+    return load_manifest(hdm05_dir)
+
+
+@pytest.fixture(scope="session")
+def hdm05_results(hdm05_manifest: list[ClipInfo]) -> dict[str, object]:
+    """HDM05 clip id -> (Motion, ImportReport, Latin-1 warnings), or the one-line error; imported once."""
+    import warnings
+
+    from physmotion.errors import PhysmotionError
+    from physmotion.io import import_clip_with_report
+    from physmotion.io.bvh import Latin1Warning
+
+    results: dict[str, object] = {}
+    for info in hdm05_manifest:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                motion, report = import_clip_with_report(info)
+            except PhysmotionError as exc:
+                results[info.clip] = str(exc)
+                continue
+        results[info.clip] = (motion, report, [w for w in caught if issubclass(w.category, Latin1Warning)])
+    return results

@@ -9,6 +9,7 @@ import pytest
 
 from physmotion.errors import MotionFormatError, PhysmotionError
 from physmotion.io import import_clip
+from physmotion.io.bvh import Latin1Warning
 
 
 def _check(path: Path, match: str, **options: object) -> None:
@@ -79,7 +80,8 @@ def test_words_in_the_motion_block(clip, tmp_path: Path) -> None:
 def test_binary_and_non_utf8_junk(tmp_path: Path) -> None:
     junk = tmp_path / "junk.bvh"
     junk.write_bytes(bytes(range(128, 256)) * 40)
-    _check(junk, "not UTF-8", rig="bandai", fps=30)
+    with pytest.warns(Latin1Warning, match="read as Latin-1"):  # then read, and refused as what it is
+        _check(junk, "not a BVH file", rig="bandai", fps=30)
     binary = tmp_path / "binary.bvh"
     binary.write_bytes(b"HIERARCHY\x00\x01\x02" * 100)
     _check(binary, "binary data", rig="bandai", fps=30)

@@ -1,0 +1,120 @@
+"""The import floor (physmotion/io/floor.py): stance soles on y = 0 over the whole clip, Penetrate capped.
+
+Measured with the metrics' own measure: ``physmotion metrics``'s humanoid surface on the saved joints.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from physmotion.io import ClipInfo, import_clip, import_clip_with_report, save_bvh
+from physmotion.io.floor import PENETRATE_CAP, _highest_floor, ground, stance_frames
+from physmotion.metrics.physical import penetrate
+from physmotion.motion import Motion
+from physmotion.physics.surface import HumanoidSurface
+
+
+def _penetrate(joints: np.ndarray, fps: float) -> float:
+    """Penetrate (mm) as `physmotion metrics` measures a saved motion: humanoid surface, float32 joints."""
+    return float(penetrate(np.asarray(joints, dtype=np.float32).astype(np.float64), fps, body=HumanoidSurface()))
+
+
+def test_highest_floor_is_exact() -> None:
+    rng = np.random.default_rng(0)
+    for n in (1, 2, 7, 200):
+        low = rng.normal(0.0, 0.03, n)
+        f = _highest_floor(low, 0.0015)
+
+        def depth(floor: float) -> float:
+            return float(np.maximum(floor - 0.005 - low, 0.0).mean())
+
+        assert depth(f) == pytest.approx(0.0015, abs=1e-12) and depth(f + 1e-6) > 0.0015
+
+
+def test_grounding_moves_with_the_motion(clip) -> None:
+    """Any vertical offset in, the same motion out; a grounded motion is left where it is."""
+    joints = import_clip(clip("bandai2_dataset-2_walk_normal_001")).joints.astype(np.float64)
+    for offset in (0.0, 0.31, -0.12):
+        out, g = ground(joints + [0.0, offset, 0.0])
+        assert np.abs(out - joints).max() < 1e-6 and g.lift == pytest.approx(-offset, abs=1e-6)
+
+
+def test_stance_frames_of_hops(hdm05_results, hdm05_manifest: list[ClipInfo]) -> None:
+    """HDM05's hops: stance frames (take-off, landing) low, flight frames not stance; a hop cut from
+    take-off to landing has none and puts its lowest point over the clip on the floor."""
+    with_stance = without = 0
+    for clip_id in (c.clip for c in hdm05_manifest if "hopBothLegs" in c.clip):
+        motion, report = hdm05_results[clip_id][:2]
+        stance = stance_frames(motion.joints)
+        feet = motion.joints[:, [7, 10, 8, 11], 1].min(axis=-1)  # lowest foot joint per frame
+        assert not stance.all(), clip_id
+        if stance.any():
+            with_stance += 1
+            assert feet[stance].max() < feet.max() - 0.1, clip_id  # the flight's top is never stance
+        else:
+            without += 1
+            lowest = HumanoidSurface().lowest_height(motion.joints.astype(np.float64))
+            assert lowest.min() == pytest.approx(0.0, abs=1e-5) and not report.grounding.capped
+    assert with_stance and without  # both kinds are in the data
+
+
+def _every_clip(import_results, hdm05_results) -> dict[str, tuple[str, Motion, object]]:
+    out: dict[str, tuple[str, Motion, object]] = {}
+    for results in (import_results, hdm05_results):
+        for k, v in results.items():
+            if isinstance(v, tuple):
+                out[k] = (v[0].source, v[0], v[1])
+    return out
+
+
+@pytest.mark.slow
+def test_captured_clips_come_in_with_penetrate_under_2mm(
+    manifest, hdm05_manifest, import_results, hdm05_results
+) -> None:
+    """Every clip of every source: Penetrate by the metrics' measure at most the cap (1.5 mm); where the
+    cap did not act, the stance frames' lowest surface point has its median on the floor (a clip with no
+    stance frame: its lowest point)."""
+    sources = {c.clip: c.source for c in [*manifest, *hdm05_manifest]}
+    per_source: dict[str, list[float]] = defaultdict(list)
+    for clip_id, (_, motion, report) in _every_clip(import_results, hdm05_results).items():
+        value = _penetrate(motion.joints, motion.fps)
+        per_source[sources[clip_id]].append(value)
+        assert value < PENETRATE_CAP + 0.01, (clip_id, value)
+        if not report.grounding.capped:
+            lowest = HumanoidSurface().lowest_height(motion.joints.astype(np.float64))
+            stance = stance_frames(motion.joints)
+            floor = np.median(lowest[stance]) if stance.any() else lowest.min()
+            assert abs(floor) < 1e-5, clip_id
+    assert set(per_source) == set(sources.values())  # every source imported
+    for source, values in sorted(per_source.items()):
+        print(f"\n{source}: {len(values)} clips, Penetrate mean {np.mean(values):.2f} max {np.max(values):.2f} mm",
+              end="")  # fmt: skip
+
+
+def _sample(manifest: list[ClipInfo]) -> list[ClipInfo]:
+    """The first clip of each source and skeleton, and the first of each HDM05 class (a hop, a lie-down)."""
+    seen: dict[tuple[str, str], ClipInfo] = {}
+    for c in manifest:
+        key = (c.source, c.skeleton if c.format == "bvh" else c.path.parent.name)
+        seen.setdefault(key, c)
+    return list(seen.values())
+
+
+@pytest.mark.slow
+def test_export_import_round_trip_within_1mm(manifest, hdm05_manifest, tmp_path: Path) -> None:
+    """A clip of every source and rig (and every HDM05 class): import, export to BVH, import again."""
+    worst: dict[str, float] = {}
+    for info in _sample([*manifest, *hdm05_manifest]):
+        motion = import_clip(info)
+        path = tmp_path / f"{info.clip}.bvh"
+        save_bvh(motion, path)
+        back, report = import_clip_with_report(path)
+        assert report.rig == "smpl22" and back.num_frames == motion.num_frames
+        worst[info.clip] = float(np.linalg.norm(back.joints - motion.joints, axis=-1).max())
+    clip = max(worst, key=worst.get)
+    print(f"\nround trip over {len(worst)} clips: max {worst[clip] * 1000:.4f} mm ({clip})")
+    assert worst[clip] < 1e-3
