@@ -62,6 +62,11 @@ class GenerateConfig:
         return replace(self, projection=self.projection.at_fine_step(),
                        morph_projection=self.morph_projection.at_fine_step())  # fmt: skip
 
+    def with_controller(self, controller: str, policy: str | None = None) -> GenerateConfig:
+        """This run with every P driven by ``controller`` ("tracker" or "policy"; ``generate --controller``)."""
+        return replace(self, projection=self.projection.with_controller(controller, policy),
+                       morph_projection=self.morph_projection.with_controller(controller, policy))  # fmt: skip
+
 
 @dataclass
 class GenerateResult:

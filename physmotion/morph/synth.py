@@ -67,13 +67,16 @@ class SynthConfig:
     split: str = "train"
     max_frames: int | None = None  # clip the drawn lengths further (quick runs); None: the model's
     ilc_passes: int = 0  # P with iterative learning control (ProjectionConfig.ilc_passes); 0: plain P
+    controller: str = "tracker"  # P's controller (ProjectionConfig.controller): "tracker" or "policy"
+    policy: str | None = None  # the policy folder for "policy"; None: the shipped one
 
     def __post_init__(self) -> None:
         self.projection()  # P's settings checked before any work (ShapeError, one line)
 
     def projection(self) -> ProjectionConfig:
         """P as Morph's selection uses it: no reset on failure, the episode stops where MPJPE passes tau."""
-        return ProjectionConfig(tau=self.tau, reset_on_fail=False, workers=1, ilc_passes=self.ilc_passes)
+        return ProjectionConfig(tau=self.tau, reset_on_fail=False, workers=1, ilc_passes=self.ilc_passes,
+                                controller=self.controller, policy=self.policy)  # fmt: skip
 
 
 @dataclass

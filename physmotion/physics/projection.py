@@ -16,7 +16,7 @@ against that raised reference.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from functools import partial
+from functools import lru_cache, partial
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
@@ -73,14 +73,25 @@ class ProjectionConfig:
     # control for offline projection").
     ilc_passes: int = 0
     ilc_gain: float = 0.5
+    # Who drives the humanoid: the model-based tracker, or the learned imitation policy over it
+    # (physics/policy.py), loaded from ``policy`` (a folder; None: the shipped one). The policy brings its
+    # own tracker settings and residual cap; ``tracking`` applies to the tracker only.
+    controller: str = "tracker"
+    policy: str | None = None
 
     def __post_init__(self) -> None:
         if not (isinstance(self.ilc_passes, int) and 0 <= self.ilc_passes <= 20):
             raise ShapeError(f"ilc_passes must be an integer in 0..20, got {self.ilc_passes}")
         if not 0.0 < self.ilc_gain <= 1.0:
             raise ShapeError(f"ilc_gain must be in (0, 1], got {self.ilc_gain}")
+        if self.controller not in ("tracker", "policy"):
+            raise ShapeError(f"controller must be 'tracker' or 'policy', got {self.controller!r}")
         if self.ilc_passes and self.reset_on_fail:  # a reset or a moved reference is no error to learn from
             raise ShapeError("ilc_passes needs the plain projection (reset_on_fail off)")
+
+    def with_controller(self, controller: str, policy: str | None = None) -> ProjectionConfig:
+        """This P driven by ``controller`` ("tracker" or "policy", the latter loaded from ``policy``)."""
+        return replace(self, controller=controller, policy=policy)
 
     @classmethod
     def sampling(cls, **overrides) -> ProjectionConfig:
@@ -226,8 +237,24 @@ def project(
     return result
 
 
-def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig) -> dict[str, np.ndarray]:
-    """P of one motion x (T, 22, 3) float64: the fields of :class:`ProjectedMotion` for it."""
+@dataclass
+class PreparedMotion:
+    """One motion made ready to simulate: the humanoid with its body and the shaped reference.
+
+    body: (22, 3) rest offsets; model: its ``mujoco.MjModel``; lift: metres its soles lie under the toe
+    joints; target: (N, 70) shaped reference qpos at the control rate; grounded: see ``ProjectedMotion``.
+    """
+
+    body: np.ndarray
+    model: object
+    lift: float
+    target: np.ndarray
+    grounded: bool
+
+
+def prepare_motion(x: np.ndarray, fps: float, config: ProjectionConfig) -> PreparedMotion:
+    """The humanoid and the shaped control-rate reference for one motion x (T, 22, 3) float64 at ``fps``,
+    as P simulates it (the learned imitator trains on exactly these)."""
     ctrl_fps = 1.0 / config.humanoid.control_dt  # the reference and the simulation run at the control rate
     body = body_from_joints(x, fps)
     model = build_model(body, config.humanoid)
@@ -235,7 +262,30 @@ def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig) -> dict[st
     qpos = resample_qpos(joints_to_qpos(x, model, lift=lift, config=config.humanoid), fps, ctrl_fps)
     grounded = _grounded(model, qpos, ctrl_fps, config)
     target = shape_reference(model, qpos, config.humanoid.control_dt, config.shaping)
-    tracker = ModelBasedTracker(model, config.tracking)  # holds no episode state: one serves every pass
+    return PreparedMotion(body, model, lift, target, grounded)
+
+
+def _controller(model, config: ProjectionConfig):
+    """The controller P runs on ``model``: the model-based tracker, or the learned policy over it."""
+    if config.controller == "tracker":
+        return ModelBasedTracker(model, config.tracking)
+    return _policy(config.policy).controller(model)
+
+
+@lru_cache(maxsize=4)
+def _policy(path: str | None):
+    """The policy in ``path`` (None: the shipped one), read once per process."""
+    from physmotion.physics.policy import load_policy
+
+    return load_policy(path)
+
+
+def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig) -> dict[str, np.ndarray]:
+    """P of one motion x (T, 22, 3) float64: the fields of :class:`ProjectedMotion` for it."""
+    ctrl_fps = 1.0 / config.humanoid.control_dt
+    prep = prepare_motion(x, fps, config)
+    body, model, lift, target, grounded = prep.body, prep.model, prep.lift, prep.target, prep.grounded
+    tracker = _controller(model, config)  # holds no episode state: one serves every pass
     reference, best = target, None
     for ilc_pass in range(config.ilc_passes + 1):
         ref = prepare_reference(model, reference, config.humanoid.control_dt, config.tracking)

@@ -112,30 +112,25 @@ def simulate(
     res_f, res_t = np.zeros(n), np.zeros(n)
     contacts = np.zeros((n, 4), dtype=bool)
     weight = float(model.body_subtreemass[0]) * STANDARD_GRAVITY
-    every = cfg.residual_every  # sim steps per root-residual update (one mj_step call of that many)
-    updates = cfg.substeps // every
     reset_state(model, data, ref)
     failed_at, resets, shifts = None, 0, 0
     for k in range(n):
         qpos[k] = data.qpos
-        mpjpe[k] = _mpjpe(data, lay, ref.joints_mj[k])
+        mpjpe[k] = mpjpe_of(data, lay, ref.joints_mj[k])
         offset = None
         if mpjpe[k] > fail_mpjpe and reset_on_fail and follow_drift:
             offset = _drift(data, lay, ref, k, fail_mpjpe, let_land)
             if offset is not None:  # the copy of the reference is made only now
                 ref = ref.shifted(k, offset, cfg.substeps)
-                mpjpe[k] = _mpjpe(data, lay, ref.joints_mj[k])
+                mpjpe[k] = mpjpe_of(data, lay, ref.joints_mj[k])
                 shifts += 1
-        # Contacts with the floor (geom 0) by the foot bodies; the other geom of a floor pair is the body's.
-        pairs = data.contact.geom[: data.ncon]
-        on_floor = model.geom_bodyid[pairs[(pairs == 0).any(axis=1)].max(axis=1)]
-        contacts[k] = (foot_bodies[:, None] == on_floor[None, :]).any(axis=1)  # np.isin: 5x slower here
+        contacts[k] = contacts_of(model, data, foot_bodies)
         if mpjpe[k] > fail_mpjpe and reset_on_fail and offset is None:
             failed_at = k if failed_at is None else failed_at
             resets += 1
             reset_state(model, data, ref, k)
             qpos[k] = data.qpos
-            mpjpe[k] = _mpjpe(data, lay, ref.joints_mj[k])
+            mpjpe[k] = mpjpe_of(data, lay, ref.joints_mj[k])
         elif mpjpe[k] > fail_mpjpe and not reset_on_fail:
             failed_at = k
             qpos[k:] = data.qpos
@@ -143,20 +138,41 @@ def simulate(
             break
         if k == n - 1:
             break
-        ctrl, qfrc = controller.act(data, ref, k)
-        data.ctrl[:] = ctrl
-        data.qfrc_applied[:] = qfrc
-        force = torque = 0.0
-        for s in range(every, cfg.substeps + 1, every):
-            # The wrench held over simulation steps s - every + 1 .. s is the one ending at step s.
-            applied = qfrc + controller.residual(data, ref, k * cfg.substeps + s, cfg.substeps)
-            data.qfrc_applied[:] = applied
-            wrench = applied[:6]
-            force += math.hypot(*wrench[:3])
-            torque += math.hypot(*wrench[3:])
-            mujoco.mj_step(model, data, every)
-        res_f[k + 1], res_t[k + 1] = force / weight / updates, torque / weight / updates
+        res_f[k + 1], res_t[k + 1] = control_step(model, data, ref, controller, k, cfg, weight)
     return Rollout(qpos, mpjpe, res_f, res_t, contacts, failed_at, resets, shifts)
+
+
+def control_step(
+    model, data, ref: Reference, controller: Controller, k: int, config: HumanoidConfig, weight: float
+) -> tuple[float, float]:
+    """Advance ``data`` over control step k -> k+1 under ``controller``: its controls held, its root
+    residual recomputed every ``config.residual_every`` simulation steps. Returns the mean residual force
+    and torque over the step as fractions of ``weight`` (N) and ``weight`` x 1 m."""
+    import mujoco
+
+    every = config.residual_every  # sim steps per root-residual update (one mj_step call of that many)
+    ctrl, qfrc = controller.act(data, ref, k)
+    data.ctrl[:] = ctrl
+    data.qfrc_applied[:] = qfrc
+    force = torque = 0.0
+    for s in range(every, config.substeps + 1, every):
+        # The wrench held over simulation steps s - every + 1 .. s is the one ending at step s.
+        applied = qfrc + controller.residual(data, ref, k * config.substeps + s, config.substeps)
+        data.qfrc_applied[:] = applied
+        wrench = applied[:6]
+        force += math.hypot(*wrench[:3])
+        torque += math.hypot(*wrench[3:])
+        mujoco.mj_step(model, data, every)
+    updates = config.substeps // every
+    return force / weight / updates, torque / weight / updates
+
+
+def contacts_of(model, data, foot_bodies: np.ndarray) -> np.ndarray:
+    """(4,) bool: which of ``foot_bodies`` (left ankle, left foot, right ankle, right foot) touch the floor."""
+    # Contacts with the floor (geom 0) by the foot bodies; the other geom of a floor pair is the body's.
+    pairs = data.contact.geom[: data.ncon]
+    on_floor = model.geom_bodyid[pairs[(pairs == 0).any(axis=1)].max(axis=1)]
+    return (foot_bodies[:, None] == on_floor[None, :]).any(axis=1)  # np.isin: 5x slower here
 
 
 def _drift(data, lay, ref: Reference, k: int, fail_mpjpe: float, let_land: bool) -> np.ndarray | None:
@@ -166,16 +182,16 @@ def _drift(data, lay, ref: Reference, k: int, fail_mpjpe: float, let_land: bool)
     offset = data.qpos[:2] - ref.qpos[k, :2]  # MuJoCo x/y: horizontal
     moved = ref.joints_mj[k].copy()
     moved[:, :2] += offset
-    if _mpjpe(data, lay, moved) <= fail_mpjpe:
+    if mpjpe_of(data, lay, moved) <= fail_mpjpe:
         return offset
     if let_land and data.qpos[2] < ref.qpos[k, 2]:
         moved[:, 2] += data.qpos[2] - ref.qpos[k, 2]
-        if _mpjpe(data, lay, moved) <= fail_mpjpe:
+        if mpjpe_of(data, lay, moved) <= fail_mpjpe:
             return offset
     return None
 
 
-def _mpjpe(data, lay, target: np.ndarray) -> float:
+def mpjpe_of(data, lay, target: np.ndarray) -> float:
     """Mean distance (m) of the 22 skeleton bodies to ``target`` (22, 3), MuJoCo frame."""
     return float(np.mean(np.linalg.norm(data.xpos[lay.body_ids] - target, axis=-1)))
 

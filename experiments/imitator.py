@@ -1,0 +1,197 @@
+"""The learned imitation policy against the model-based tracker, inside P: one table from one run.
+
+Usage: python experiments/imitator.py generated [--seeds 0,1,2] [--categories run,jog,jump,hop,kick]
+       python experiments/imitator.py captured --data data_build/mocap [--split test]
+       (either with --policy DIR; default: the shipped one; --out results/imitator_<part>)
+
+generated: the unseen prompts (``eval.prompts.NEW_PROMPTS``) of the fast categories, 6 s each, PhysDiff's
+default schedule with P driven by the tracker and by the policy, against the same seed's ``none+floor``.
+Per output: Phys-Err (mm) and whether it is below ``none+floor``'s, the projection's resets, the root
+residual force (fractions of body weight W) and torque (W x 1 m) of the last projection, and the MPJPE of
+the output to the same seed's plain sample (``none``).
+
+captured: every (unmirrored) item of a dataset split, the plain P (no reset: imitation selection), tracker
+and policy: success, MPJPE, root residual, Float and Skate of the simulation against the input's.
+
+Writes ``<out>.md`` (the table) and ``<out>.json`` (per-output rows and a meta block: command, commit,
+CPU, date, P's preset and controller settings).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import subprocess
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from physmotion.conventions import FPS
+from physmotion.motion import write_atomic
+
+FAST = ("run", "jog", "jump", "hop", "kick")
+CONTROLLERS = ("tracker", "tracker at cap", "policy")  # "tracker at cap": its residual bounded as the policy's
+
+
+def _with_controller(config, name: str, policy_dir: str | None):
+    """``config`` (a ProjectionConfig or GenerateConfig) driven by the controller called ``name``."""
+    from physmotion.physics.policy import capped_tracking, load_policy
+
+    if name != "tracker at cap":
+        return config.with_controller(name, policy_dir)
+    cap = load_policy(policy_dir).settings.cap
+    if hasattr(config, "projection"):
+        return replace(config, projection=replace(config.projection,
+                                                  tracking=capped_tracking(config.projection.tracking, cap)))
+    return replace(config, tracking=capped_tracking(config.tracking, cap))
+
+
+def _meta(args: argparse.Namespace, preset: str) -> dict:
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+    cpu = platform.processor()
+    try:
+        cpu = next(line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
+                   if line.startswith("model name"))  # fmt: skip
+    except (OSError, StopIteration):
+        pass
+    from physmotion.physics.policy import load_policy
+
+    policy = load_policy(args.policy)
+    return {"command": " ".join(sys.argv), "commit": commit, "cpu": cpu, "date": time.strftime("%Y-%m-%d"),
+            "preset": preset, "policy": args.policy or "shipped", "policy_cap": policy.settings.cap,
+            "policy_card": {k: policy.card.get(k) for k in ("iterations", "samples", "wall_minutes", "hardware")}}
+
+
+def _phys(joints: np.ndarray, body) -> dict[str, float]:
+    from physmotion.metrics import physical_metrics
+    from physmotion.physics.surface import HumanoidSurface
+
+    return physical_metrics(joints[None], FPS, body=HumanoidSurface([body]))
+
+
+def generated(args: argparse.Namespace) -> tuple[list[dict], dict]:
+    from physmotion.diffusion.model import MotionDiffusion
+    from physmotion.eval.prompts import NEW_PROMPTS
+    from physmotion.generate import GenerateConfig, generate
+
+    model = MotionDiffusion.load(args.model)
+    rows = []
+    for cat in args.categories.split(","):
+        prompts = list(NEW_PROMPTS[cat])
+        for seed in [int(s) for s in args.seeds.split(",")]:
+            base = GenerateConfig(seed=seed)
+            plain = generate(prompts, replace(base, physics="none"), model)
+            floor = generate(prompts, replace(base, physics="none+floor"), model)
+            outs = {}
+            for ctrl in CONTROLLERS:
+                start = time.perf_counter()
+                outs[ctrl] = generate(prompts, _with_controller(base, ctrl, args.policy), model)
+                outs[ctrl].seconds = time.perf_counter() - start
+            for i, text in enumerate(prompts):
+                f = floor.motions[i]
+                base_err = _phys(f.joints, f.humanoid)["phys_err"]
+                for ctrl in CONTROLLERS:
+                    m = outs[ctrl].motions[i]
+                    err = _phys(m.joints, m.humanoid)["phys_err"]
+                    n = min(len(m.joints), len(plain.motions[i].joints))
+                    res = m.residual if m.residual is not None else np.zeros((n, 2))
+                    rows.append({
+                        "category": cat, "prompt": text, "seed": seed, "controller": ctrl,
+                        "phys_err": err, "floor_phys_err": base_err, "below_floor": bool(err < base_err),
+                        "resets": int(m.resets or 0),
+                        "residual_force": float(res[:, 0].mean()), "residual_torque": float(res[:, 1].mean()),
+                        "residual_force_p95": float(np.percentile(res[:, 0], 95)),
+                        "mpjpe_to_sample_mm": 1000.0 * float(np.linalg.norm(
+                            m.joints[:n] - plain.motions[i].joints[:n], axis=-1).mean()),
+                        "seconds": outs[ctrl].seconds / len(prompts),
+                    })  # fmt: skip
+            print(f"{cat} seed {seed} done", file=sys.stderr, flush=True)
+    return rows, _meta(args, "sampling (generate's PhysDiff P)")
+
+
+def captured(args: argparse.Namespace) -> tuple[list[dict], dict]:
+    from physmotion.imitator.clips import dataset_clips
+    from physmotion.physics.projection import ProjectionConfig, project
+
+    clips = [c for c in dataset_clips(args.data, args.split) if not c.name.startswith("M")]
+    rows = []
+    for ctrl in CONTROLLERS:
+        cfg = _with_controller(ProjectionConfig(), ctrl, args.policy)
+        start = time.perf_counter()
+        results = [project(c.joints, c.fps, cfg) for c in clips]
+        seconds = (time.perf_counter() - start) / len(clips)
+        for c, r in zip(clips, results):
+            sim, inp = _phys(r.simulated, r.body), _phys(c.joints, None)
+            rows.append({
+                "clip": c.name, "controller": ctrl, "success": bool(r.success), "selected": bool(r.selected),
+                "mpjpe_mm": 1000.0 * float(r.mpjpe.mean()), "residual_force": float(r.residual_force.mean()),
+                "residual_torque": float(r.residual_torque.mean()),
+                "float": sim["float"], "skate": sim["skate"], "input_float": inp["float"],
+                "input_skate": inp["skate"], "seconds": seconds,
+            })  # fmt: skip
+        print(f"{ctrl} done", file=sys.stderr, flush=True)
+    return rows, _meta(args, "plain (ProjectionConfig())")
+
+
+def _table(rows: list[dict], part: str) -> str:
+    def mean(sel, key):
+        return float(np.mean([r[key] for r in sel]))
+
+    if part == "generated":
+        head = ("| category | P's controller | outputs | with a reset | Phys-Err mm | none+floor mm | below none+floor "
+                "| residual W | residual p95 W | torque W m | MPJPE to sample mm | s/motion |")  # fmt: skip
+        lines = [head, "|---" * 12 + "|"]
+        for cat in dict.fromkeys(r["category"] for r in rows):
+            for ctrl in CONTROLLERS:
+                sel = [r for r in rows if r["category"] == cat and r["controller"] == ctrl]
+                lines.append(f"| {cat} | {ctrl} | {len(sel)} | {100 * np.mean([r['resets'] > 0 for r in sel]):.0f} % "
+                             f"| {mean(sel, 'phys_err'):.1f} | {mean(sel, 'floor_phys_err'):.1f} "
+                             f"| {100 * mean(sel, 'below_floor'):.0f} % | {mean(sel, 'residual_force'):.3f} "
+                             f"| {mean(sel, 'residual_force_p95'):.3f} | {mean(sel, 'residual_torque'):.3f} "
+                             f"| {mean(sel, 'mpjpe_to_sample_mm'):.0f} | {mean(sel, 'seconds'):.2f} |")  # fmt: skip
+        for ctrl in CONTROLLERS:
+            sel = [r for r in rows if r["controller"] == ctrl]
+            lines.append(f"| **all** | {ctrl} | {len(sel)} | {100 * np.mean([r['resets'] > 0 for r in sel]):.0f} % "
+                         f"| {mean(sel, 'phys_err'):.1f} | {mean(sel, 'floor_phys_err'):.1f} "
+                         f"| {100 * mean(sel, 'below_floor'):.0f} % | {mean(sel, 'residual_force'):.3f} "
+                         f"| {mean(sel, 'residual_force_p95'):.3f} | {mean(sel, 'residual_torque'):.3f} "
+                         f"| {mean(sel, 'mpjpe_to_sample_mm'):.0f} | {mean(sel, 'seconds'):.2f} |")  # fmt: skip
+        return "\n".join(lines)
+    head = ("| P's controller | clips | success | selected | MPJPE mm | residual W | torque W m | Float mm "
+            "(input) | Skate mm (input) | s/clip |")
+    lines = [head, "|---" * 10 + "|"]
+    for ctrl in CONTROLLERS:
+        sel = [r for r in rows if r["controller"] == ctrl]
+        lines.append(f"| {ctrl} | {len(sel)} | {100 * mean(sel, 'success'):.0f} % | {100 * mean(sel, 'selected'):.0f} % "
+                     f"| {mean(sel, 'mpjpe_mm'):.1f} | {mean(sel, 'residual_force'):.3f} "
+                     f"| {mean(sel, 'residual_torque'):.3f} | {mean(sel, 'float'):.1f} ({mean(sel, 'input_float'):.1f}) "
+                     f"| {mean(sel, 'skate'):.1f} ({mean(sel, 'input_skate'):.1f}) | {mean(sel, 'seconds'):.2f} |")  # fmt: skip
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("part", choices=("generated", "captured"))
+    parser.add_argument("--policy", default=None)
+    parser.add_argument("--model", default=None)
+    parser.add_argument("--seeds", default="0,1,2")
+    parser.add_argument("--categories", default=",".join(FAST))
+    parser.add_argument("--data", default="data_build/mocap")
+    parser.add_argument("--split", default="test")
+    parser.add_argument("--out", default=None)
+    args = parser.parse_args()
+    rows, meta = generated(args) if args.part == "generated" else captured(args)
+    out = Path(args.out or f"results/imitator_{args.part}")
+    table = _table(rows, args.part)
+    print(table)
+    md = f"# P's controllers on {args.part} motion\n\n`{meta['command']}` (commit {meta['commit']}, {meta['cpu']})\n\n{table}\n"
+    write_atomic(out.with_suffix(".md"), lambda f: f.write(md), "w")
+    write_atomic(out.with_suffix(".json"), lambda f: f.write(json.dumps({"meta": meta, "rows": rows}, indent=2)), "w")
+
+
+if __name__ == "__main__":
+    main()
