@@ -64,7 +64,7 @@ def main() -> None:
     args = parser.parse_args()
     cfg = ProjectionConfig()
     clips = {c.clip: c for c in load_manifest(args.mocap)}
-    joints = import_clip(clips[CLIP]).joints[: int(args.seconds * 20)]
+    joints = import_clip(clips[CLIP], floor="frame0").joints[: int(args.seconds * 20)]  # P's input convention
     sim_steps = (len(joints) - 1) / 20 / cfg.humanoid.sim_dt
 
     raw = raw_steps_per_second(cfg)

@@ -68,14 +68,37 @@ def _warn(message: str) -> None:
     print(f"warning: {message}", file=sys.stderr)
 
 
+# The options of every command that reads a .bvh (import's own help says more).
+BVH_RIG_HELP = "Rig of .bvh input, as for `import` (guessed if left out)."
+BVH_FPS_HELP = "True frame rate of .bvh input, as for `import`."
+BVH_MAPPING_HELP = ("JSON file naming the .bvh's joint (or End Site, '<parent>_end') for each of our 22 joints, "
+                    "as for `import` (docs/examples/mapping_bandai.json).")
+
+
+def _model_dir(model: Path | None) -> Path | None:
+    """A --model as given, or a shipped model's folder where a bare name (``morph``) names one and no
+    folder of that name exists here: model names work from any directory."""
+    if model is None or model.exists() or len(model.parts) != 1:
+        return model
+    from physmotion.diffusion.model import DEFAULT_MODEL_DIR
+
+    shipped = DEFAULT_MODEL_DIR.parent / model.name
+    return shipped if (shipped / "config.json").is_file() else model
+
+
 @data_app.command("build")
 def data_build(
-    source: Path = typer.Option(..., help="Mocap folder with manifest.csv (e.g. ../shared/data/mocap)."),
+    source: list[Path] = typer.Option(..., help="Mocap folder with manifest.csv (e.g. ../shared/data/mocap); "
+                                      "repeat it to build several into one dataset (their manifests in the same "
+                                      "columns, clip ids unique)."),
     out: Path = typer.Option(..., "-o", "--out", help="Output folder (HumanML3D layout). An earlier build "
                              "there is replaced only with --overwrite."),
     exclude_license: list[str] = typer.Option([], "--exclude-license", help="Leave out clips with this licence tag, e.g. NC."),
     seed: int = typer.Option(0, help="Salt of the take -> split assignment."),
     mirror: bool = typer.Option(True, help="Add left/right mirrored copies, as HumanML3D does."),
+    pad_short: bool = typer.Option(True, help="Hold a clip shorter than 2 s still at both ends up to 2 s "
+                                   "(HumanML3D's shortest motion) instead of skipping it; --no-pad-short builds "
+                                   "as before 2026-11-28."),
     jobs: int = typer.Option(0, help="Worker processes (0: one per core)."),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
     activations: bool = typer.Option(False, "--activations", help="Also cache muscle-activation stand-ins "
@@ -83,13 +106,13 @@ def data_build(
     features: int = typer.Option(263, help="263 (HumanML3D) or 329 (BioMoDiffuse: + joint accelerations; "
                                  "what `train denoiser --arch biomo` needs, with --activations)."),
 ) -> None:
-    """Import every clip of a mocap collection into a HumanML3D-layout dataset."""
+    """Import every clip of one or more mocap collections into a HumanML3D-layout dataset."""
     from physmotion.data.build import BuildConfig, build_dataset
     from physmotion.paths import check_output
 
     check_output(out, "folder", overwrite=overwrite)
     config = BuildConfig(exclude_licences=tuple(exclude_license), seed=seed, mirror=mirror, jobs=jobs,
-                         features=features)
+                         features=features, pad_short=pad_short)
     report = build_dataset(source, out, config, progress=sys.stderr.isatty())
     for clip, reason in sorted(report.skipped.items()):
         console.print(f"[yellow]skipped[/] {clip}: {reason}", highlight=False)
@@ -100,6 +123,14 @@ def data_build(
         f"items: {items}",
         highlight=False,
     )
+    for name, src in report.sources.items():
+        licences = "; ".join(f"{tag or 'open'} ({', '.join(names)})" for tag, names in src.licences.items())
+        console.print(f"  {name}: {src.built}/{src.clips} clips, {src.minutes:.1f} min; {licences}",
+                      highlight=False)  # fmt: skip
+    latin1 = {name: src.latin1 for name, src in report.sources.items() if src.latin1}
+    if latin1:
+        _warn(f"{sum(latin1.values())} clips' files are not UTF-8 and were read as Latin-1 ("
+              + ", ".join(f"{name} {n}" for name, n in latin1.items()) + ")")
     if activations:
         data_activations(out, jobs)
 
@@ -147,13 +178,16 @@ def import_motion(
     ),
     mapping: Path | None = typer.Option(
         None, help="JSON file naming the file's joint for each of our 22 joints, plus optional units, "
-        "up_axis and fps, for a rig without a table (docs/examples/mapping_bandai.json). Flags override it."),
+        "up_axis and fps, for a rig without a table (docs/examples/mapping_bandai.json); an End Site is "
+        "named '<parent>_end'. Flags override it."),
     asf: Path | None = typer.Option(None, help="The skeleton (.asf) of an .amc file."),
     fps: float | None = typer.Option(None, help="True frame rate, where the header is wrong or absent."),
     up_axis: str | None = typer.Option(None, help="Y or Z, overriding the rig's or mapping's."),
     units: str | None = typer.Option(None, help="cm, m, inch or a factor to metres, overriding the rig's or mapping's."),
+    overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
-    """Import one mocap file to the 22-joint skeleton at 20 fps, Y up, floor at 0, facing +Z."""
+    """Import one mocap file to the 22-joint skeleton at 20 fps, Y up, facing +Z, its stance soles on the
+    floor (y = 0)."""
     from physmotion.io.rigs import describe_rig
 
     if rig == "list":
@@ -162,7 +196,7 @@ def import_motion(
         return
     if path is None or out is None:
         raise PhysmotionError("import needs a FILE and -o OUT (or --rig list to see the rig tables)")
-    _check_out(out)
+    _check_out(out, overwrite)
     from physmotion.io.export import save_motion
     from physmotion.io.importer import import_clip
 
@@ -229,7 +263,7 @@ def project_motion(
 @app.command("metrics")
 def metrics(
     paths: list[Path] = typer.Argument(
-        ..., help="Motion .npz files (joints, fps); import other formats first."),
+        ..., help="Motion files: .npz (joints, fps), or .bvh (imported on the fly, as render does)."),
     surface: str = typer.Option(
         "humanoid", help="Body surface for Penetrate/Float/Skate: 'humanoid' (MuJoCo geometry posed on "
         "the joints: the simulated body where the file carries it, as generate writes for projected "
@@ -241,6 +275,9 @@ def metrics(
     out: Path | None = typer.Option(
         None, "-o", "--out", help="Write the JSON or CSV to this file (atomically) instead of stdout; its "
         "suffix (.json, .csv) picks the format if neither flag is given."),
+    rig: str | None = typer.Option(None, help=BVH_RIG_HELP),
+    fps: float | None = typer.Option(None, help=BVH_FPS_HELP),
+    mapping: Path | None = typer.Option(None, help=BVH_MAPPING_HELP),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
     """Print the physical metrics (PhysDiff, EDGE/Morph, BioMoDiffuse) of one or more motions.
@@ -263,11 +300,16 @@ def metrics(
         if fmt is None:
             raise PhysmotionError(f"{out}: give --json or --csv (or an -o ending in .json or .csv)")
         _check_out(out, overwrite)
+    from physmotion.render import load_motion
+
     for path in paths:
-        check_npz(path)
+        if path.suffix.lower() != ".bvh":
+            check_npz(path)
+        elif not path.is_file():
+            raise PhysmotionError(f"{path}: no such file")
     results = {}
     for path, label in zip(paths, path_labels(paths)):
-        motion = Motion.load(path)
+        motion = load_motion(path, rig=rig, fps=fps, mapping=mapping)  # an .npz as saved, a .bvh imported
         body = None
         if surface == "humanoid":
             from physmotion.physics.surface import HumanoidSurface
@@ -297,7 +339,8 @@ def refine_cmd(
     strength: float = typer.Option(0.3, help="Share of the diffusion steps to invert, in [0, 1] (0 returns "
                                    "the input on the dataset's skeleton)."),
     text: str = typer.Option("", help="Caption to condition on (default: none)."),
-    model_dir: Path | None = typer.Option(None, "--model", help="Model folder (default: the shipped model)."),
+    model_dir: Path | None = typer.Option(None, "--model", help="Model folder, or a shipped model's name "
+                                          "(default, morph) (default: the shipped model)."),
     steps: int = typer.Option(50, help="DDIM steps of the full schedule."),
     phys_scale: float | None = typer.Option(None, help="BioMoDiffuse models only: physics guidance weight "
                                             "(default: 1)."),
@@ -305,6 +348,9 @@ def refine_cmd(
                                     "fuse the result with it; 0: the paper's plain inversion."),
     anchor_hz: float = typer.Option(1.0, help="Plain inversion only: heading and root path slower than this "
                                     "(Hz) follow the input; 0: one yaw + shift for the whole clip."),
+    rig: str | None = typer.Option(None, help=BVH_RIG_HELP),
+    fps: float | None = typer.Option(None, help=BVH_FPS_HELP),
+    mapping: Path | None = typer.Option(None, help=BVH_MAPPING_HELP),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
     """Refine a motion by DDIM inversion and denoising (BioMoDiffuse Sec. 3.5; physics guidance with a
@@ -324,14 +370,15 @@ def refine_cmd(
     if path.suffix.lower() == ".bvh":
         from physmotion.io.importer import import_clip
 
-        motion = import_clip(path)
+        motion = import_clip(path, rig=rig, fps=fps, mapping=mapping)
     else:
         motion = Motion.load(path)
-    model = MotionDiffusion.load(model_dir)
+    model = MotionDiffusion.load(_model_dir(model_dir))
     check_motion(motion.joints, motion.fps, model)  # length and NaN before the work
     joints = refine(model, motion.joints, motion.fps, config)
-    nc = "NC" in (motion.licence_tag, model.licence_tag)
-    licence = "NC" if nc else model.licence_tag  # the stricter of the input's and the model's
+    # every restriction of the input's and of the model's data travels (NC, SA: joined "NC,SA")
+    tags = {t for t in motion.licence_tag.split(",") if t} | set(model.info.get("licence_tags", []))
+    licence = ",".join(sorted(tags - {"open", "unknown"})) or model.licence_tag
     Motion(joints=joints, fps=FPS, texts=list(motion.texts) or ([text] if text else []), licence_tag=licence,
            source=motion.source).save(out)  # fmt: skip
     console.print(f"wrote {out}: {len(joints)} frames, strength {strength:g}", highlight=False)
@@ -366,7 +413,8 @@ def generate_cmd(
                                             "0 = without the physical network (default: 1)."),
     speed: float | None = typer.Option(None, help="BioMoDiffuse models only: speed control signal, scales "
                                        "the physical network's accelerations (default: 1)."),
-    model: Path | None = typer.Option(None, help="Model folder; the shipped model if left out."),
+    model: Path | None = typer.Option(None, help="Model folder, or a shipped model's name (default, morph); "
+                                      "the shipped default model if left out."),
     fine_step: bool = typer.Option(False, "--fine-step", help="Simulate the projection at 1/720 s instead "
                                    "of 1/360 s: PhysDiff on unseen prompts 12.5 -> 11.2 mm Phys-Err, for "
                                    "1.3-1.4x PhysDiff's time (bench/generate.py)."),
@@ -393,6 +441,7 @@ def generate_cmd(
     cfg = _with(GenerateConfig(), seconds=seconds, num=num, physics=physics, seed=seed)
     cfg = cfg.at_fine_step() if fine_step else cfg
     check_outputs(texts, out, cfg, overwrite)
+    model = _model_dir(model)
     net = MotionDiffusion.load(model)
     cfg.sampler = _with(default_sampler(net), sampler=sampler, steps=steps, eta=eta, cfg_scale=cfg_scale,
                         phys_scale=phys_scale, speed=speed)  # fmt: skip
@@ -600,8 +649,9 @@ def render_cmd(
                                "per motion, with a legend)."),
     frame: int | None = typer.Option(None, help="Write only this frame (0-based, at the common rate) as a .png."),
     size: int = typer.Option(480, help="Pixels per panel (square)."),
-    rig: str | None = typer.Option(None, help="Rig of .bvh input, as for `import` (guessed if left out)."),
-    fps: float | None = typer.Option(None, help="True frame rate of .bvh input, as for `import`."),
+    rig: str | None = typer.Option(None, help=BVH_RIG_HELP),
+    fps: float | None = typer.Option(None, help=BVH_FPS_HELP),
+    mapping: Path | None = typer.Option(None, help=BVH_MAPPING_HELP),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
     """Draw motions side by side or overlaid: floor grid with a 1 m bar, frame/time counter, foot contacts.
@@ -610,7 +660,8 @@ def render_cmd(
     from physmotion.render import render_files
 
     _check_out(out, overwrite)
-    done = render_files(paths, out, layout=layout, size=size, frame=frame, rig=rig, fps=fps)  # type: ignore[arg-type]
+    done = render_files(paths, out, layout=layout, size=size, frame=frame, rig=rig, fps=fps,  # type: ignore[arg-type]
+                        mapping=mapping)
     console.print(f"wrote {out}: {done.frames} frame(s) at {done.fps:g} fps, {done.width}x{done.height} px",
                   highlight=False)
 
@@ -619,15 +670,16 @@ def render_cmd(
 def view_cmd(
     paths: list[Path] = typer.Argument(..., help="Motion files: .npz, or .bvh (imported on the fly)."),
     out: Path = typer.Option(..., "-o", "--out", help="Output .html: one self-contained page, no network."),
-    rig: str | None = typer.Option(None, help="Rig of .bvh input, as for `import` (guessed if left out)."),
-    fps: float | None = typer.Option(None, help="True frame rate of .bvh input, as for `import`."),
+    rig: str | None = typer.Option(None, help=BVH_RIG_HELP),
+    fps: float | None = typer.Option(None, help=BVH_FPS_HELP),
+    mapping: Path | None = typer.Option(None, help=BVH_MAPPING_HELP),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
     """Write a 3-D viewer page (WebGL): orbit camera, play/pause, scrub slider, foot contacts, floor grid."""
     from physmotion.viewer import view_files
 
     _check_out(out, overwrite)
-    done = view_files(paths, out, rig=rig, fps=fps)
+    done = view_files(paths, out, rig=rig, fps=fps, mapping=mapping)
     console.print(f"wrote {out}: {done.frames} frames at {done.fps:g} fps, {done.bytes / 1e6:.1f} MB; "
                   "open it in a browser", highlight=False)  # fmt: skip
 

@@ -66,10 +66,11 @@ class Track:
 # Loading and aligning
 
 
-def load_motion(path: str | Path, *, rig: str | None = None, fps: float | None = None) -> Motion:
+def load_motion(path: str | Path, *, rig: str | None = None, fps: float | None = None,
+                mapping: str | Path | None = None) -> Motion:  # fmt: skip
     """A motion file as a Motion: an .npz of :meth:`Motion.save`, or a .bvh imported on the fly
-    (:func:`physmotion.io.importer.import_clip`; ``rig`` and ``fps`` as for ``physmotion import``, the rig
-    guessed when None)."""
+    (:func:`physmotion.io.importer.import_clip`; ``rig``, ``fps`` and ``mapping`` (a mapping JSON file) as
+    for ``physmotion import``, the rig guessed when None)."""
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in MOTION_SUFFIXES:
@@ -79,8 +80,8 @@ def load_motion(path: str | Path, *, rig: str | None = None, fps: float | None =
     if suffix == ".bvh":
         from physmotion.io.importer import import_clip
 
-        return import_clip(path, rig=rig, fps=fps)
-    return Motion.load(path)  # an .npz carries its own rate; rig and fps are the BVH importer's
+        return import_clip(path, rig=rig, fps=fps, mapping=mapping)
+    return Motion.load(path)  # an .npz carries its own rate; rig, fps and mapping are the BVH importer's
 
 
 def short_labels(paths: Sequence[str | Path]) -> list[str]:
@@ -367,8 +368,9 @@ class RenderSummary:
 
 
 def render_files(paths: Sequence[str | Path], out: str | Path, layout: Layout = "side", size: int = PANEL_SIZE,
-                 frame: int | None = None, rig: str | None = None, fps: float | None = None) -> RenderSummary:  # fmt: skip
-    """Render motion files (.npz, or .bvh imported with ``rig`` / ``fps``) to ``out``: a .gif or .mp4 of
+                 frame: int | None = None, rig: str | None = None, fps: float | None = None,
+                 mapping: str | Path | None = None) -> RenderSummary:  # fmt: skip
+    """Render motion files (.npz, or .bvh imported with ``rig`` / ``fps`` / ``mapping``) to ``out``: a .gif or .mp4 of
     every frame, or with ``frame`` (an index at the common rate) a .png still. Checks every argument
     before drawing, and writes nothing on a failure."""
     out = Path(out)
@@ -383,7 +385,7 @@ def render_files(paths: Sequence[str | Path], out: str | Path, layout: Layout = 
         raise PhysmotionError(f"--size must be an even number of pixels from 64 to 2048, got {size}")
     if suffix == ".mp4":
         _require_av()
-    motions = [load_motion(p, rig=rig, fps=fps) for p in paths]
+    motions = [load_motion(p, rig=rig, fps=fps, mapping=mapping) for p in paths]
     tracks, rate = make_tracks(motions, short_labels(paths))
     n = len(tracks[0].joints)
     if frame is not None and not 0 <= frame < n:

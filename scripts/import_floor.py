@@ -1,5 +1,5 @@
 """Where imported motion meets the floor: Penetrate after import per source, and the export -> import
-round trip, on every clip of the given collections (docs/decisions.md, "import floor").
+round trip, on every clip of the given collections (docs/decisions/data.md "import floor").
 
 Usage: python scripts/import_floor.py [--source ../shared/data/mocap --source ../shared/data/hdm05]
        [--round-trip-every N] [--json out.json]

@@ -1,4 +1,4 @@
-"""Build a dataset in HumanML3D's folder layout from a mocap collection (manifest + raw files).
+"""Build a dataset in HumanML3D's folder layout from one or more mocap collections (manifest + raw files).
 
 Layout written (HumanML3D's, plus two files of ours)::
 
@@ -7,13 +7,20 @@ Layout written (HumanML3D's, plus two files of ours)::
     texts/<id>.txt            one caption per line
     train.txt val.txt test.txt   ids, one per line
     Mean.npy Std.npy          feature statistics of the train split (HumanML3D's cal_mean_variance)
-    index.csv                 id, clip, take, source, licence_tag, window start/end frames, mirrored
-    build_info.json           source, options, counts, skipped clips with reasons
+    index.csv                 id, clip, take (the capture), source, licence_tag, split, window start/end
+                              frames, mirrored, padded (frames held at the ends of a short clip)
+    build_info.json           sources (minutes, clips, licences of each), options, counts, licence tags,
+                              skipped clips with reasons
+    sources/<name>.md         each source folder's README.md (its attribution and licence terms)
     activations/<id>.npy      (T, 8) float32 muscle-activation stand-ins, optional (:func:`build_activations`)
 
 Differences from HumanML3D, on purpose: ``new_joints`` holds the processed joints that went into the
 features rather than joints recovered from them, so the round trip features -> joints can be checked;
 Mean/Std come from the train split only, so no statistic leaks from test data.
+
+Several sources (folders with a ``manifest.csv`` in the same columns) build into one dataset: clip ids
+must differ across them; a physical capture stays in one split (:func:`capture_of`); every licence tag
+and each source's README travel with the data.
 """
 
 from __future__ import annotations
@@ -25,6 +32,8 @@ import os
 import re
 import shutil
 import tempfile
+import warnings
+from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -36,6 +45,7 @@ from physmotion.errors import PhysmotionError
 from physmotion.features.biomech import FEATURE_DIM_BIOMECH, extract_features_329
 from physmotion.features.humanml3d import FEATURE_DIM, extract_features
 from physmotion.features.normalize import compute_mean_std
+from physmotion.io.bvh import Latin1Warning
 from physmotion.io.importer import ClipInfo, import_clip, load_manifest
 from physmotion.physics.activations import ACTIVATION_CHANNELS, activations
 from physmotion.physics.workers import map_in_workers, worker_count
@@ -60,10 +70,28 @@ class BuildConfig:
     """Add a left/right mirrored copy of every window (ids prefixed "M"), as HumanML3D does."""
     max_frames: int = MAX_FRAMES
     min_frames: int = MIN_FRAMES
+    pad_short: bool = True
+    """A clip shorter than ``min_frames + 1`` joint frames is held still at both ends up to that length
+    (index.csv: ``padded`` frames) rather than skipped: 121 of HDM05's 188 clips are single repetitions
+    under 2 s (docs/decisions/data.md "several sources in one build")."""
     jobs: int = 0
     """Worker processes; 0 means one per CPU core."""
     features: int = FEATURE_DIM
     """263 (HumanML3D) or 329 (BioMoDiffuse: + joint accelerations) dimensions in new_joint_vecs."""
+
+
+@dataclass
+class SourceReport:
+    """One source folder of a build: its clips, those built, minutes of distinct capture, its licences
+    (licence tag -> licence names of its manifest; "" is the tag of clips with no restriction) and
+    clips whose files were read as Latin-1."""
+
+    path: str
+    clips: int = 0
+    built: int = 0
+    minutes: float = 0.0
+    licences: dict[str, list[str]] = field(default_factory=dict)
+    latin1: int = 0
 
 
 @dataclass
@@ -74,6 +102,7 @@ class BuildReport:
     minutes: float = 0.0  # distinct capture: mirrored copies not counted
     skipped: dict[str, str] = field(default_factory=dict)
     minutes_with_mirrors: float = 0.0  # every item, mirrored copies included (what training draws from)
+    sources: dict[str, SourceReport] = field(default_factory=dict)  # by source name (source_names)
 
 
 @dataclass
@@ -89,6 +118,25 @@ class _Item:
     texts: list[str]
     features: np.ndarray
     joints: np.ndarray
+    padded: int = 0  # frames held at the ends of a short clip (not capture: minutes leave them out)
+
+
+# HDM05's clips are segments of longer captures (consecutive segments of one actor and class often join
+# frame to frame), but its manifest names each segment its own take: the capture is actor + class.
+_HDM05_FILE = re.compile(r"^HDM_(?P<actor>[A-Za-z]+)_(?P<label>[A-Za-z0-9]+)_\d+_\d+$")
+
+
+def capture_of(info: ClipInfo) -> str:
+    """The physical capture a clip comes from, which a split must keep on one side: the manifest's
+    ``take``, except for HDM05 segments (``HDM_<actor>_<class>_<index>_<fps>``): ``hdm05_<actor>_<class>``."""
+    match = _HDM05_FILE.match(info.path.stem)
+    return f"hdm05_{match['actor']}_{match['label']}" if match else info.take
+
+
+def source_names(sources: Sequence[Path]) -> list[str]:
+    """A short name per source folder: its folder name, or its whole path where two names clash."""
+    names = [Path(s).name or str(s) for s in sources]
+    return [n if names.count(n) == 1 else str(s) for n, s in zip(names, sources)]
 
 
 def split_of(take: str, config: BuildConfig) -> str:
@@ -127,29 +175,54 @@ def mirror_text(text: str) -> str:
     return _SWAP.sub(swap, text)
 
 
-def _process_clip(info: ClipInfo, config: BuildConfig) -> list[_Item] | str:
-    """Import one clip and cut it into feature windows; a string is the reason it was skipped."""
-    try:
-        motion = import_clip(info)
-    except PhysmotionError as exc:
-        return str(exc)
+def _process_clip(info: ClipInfo, config: BuildConfig) -> tuple[list[_Item] | str, bool]:
+    """Import one clip and cut it into feature windows (a string: the reason it was skipped); and
+    whether its files were read as Latin-1 (the build reports that once, not once per clip)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", Latin1Warning)
+        try:
+            result = _windows_of(info, config)
+        except PhysmotionError as exc:
+            result = str(exc)
+    latin1 = any(issubclass(w.category, Latin1Warning) for w in caught)
+    for w in caught:
+        if not issubclass(w.category, Latin1Warning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return result, latin1
+
+
+def pad_ends(joints: np.ndarray, frames: int) -> tuple[np.ndarray, int]:
+    """``joints`` (T, ...) lengthened to ``frames`` by holding its first and last frames (half before, half
+    after: a still start and end, as a capture of one short action would hold), and the frames added."""
+    need = max(frames - len(joints), 0)
+    before = need // 2
+    out = np.concatenate([np.repeat(joints[:1], before, 0), joints, np.repeat(joints[-1:], need - before, 0)])
+    return out, need
+
+
+def _windows_of(info: ClipInfo, config: BuildConfig) -> list[_Item] | str:
+    motion = import_clip(info)
+    whole = motion.joints
+    padded = 0
     if motion.num_frames - 1 < config.min_frames:
-        return f"too short: {motion.num_frames} frames at {FPS} fps, need {config.min_frames + 1}"
+        if not config.pad_short:
+            return f"too short: {motion.num_frames} frames at {FPS} fps, need {config.min_frames + 1}"
+        whole, padded = pad_ends(whole, config.min_frames + 1)
     items: list[_Item] = []
-    for k, (s, e) in enumerate(windows(motion.num_frames, config.max_frames)):
+    for k, (s, e) in enumerate(windows(len(whole), config.max_frames)):
         if e - s - 1 < config.min_frames:
             continue
         for mirrored in (False, True) if config.mirror else (False,):
-            joints = motion.joints[s:e]
+            joints = whole[s:e]
             joints = mirror_joints(joints) if mirrored else joints
             feats, canon = _extract(joints, config.features)
             texts = [mirror_text(t) for t in motion.texts] if mirrored else list(motion.texts)
             items.append(
                 _Item(
                     id=f"{'M' if mirrored else ''}{info.clip}_{k:02d}",
-                    clip=info.clip, take=info.take, source=info.source, licence_tag=info.licence_tag,
+                    clip=info.clip, take=capture_of(info), source=info.source, licence_tag=info.licence_tag,
                     start=s, end=e, mirrored=mirrored, texts=texts,
-                    features=feats.astype(np.float32), joints=canon[:-1].astype(np.float32),
+                    features=feats.astype(np.float32), joints=canon[:-1].astype(np.float32), padded=padded,
                 )  # fmt: skip
             )
     return items
@@ -161,49 +234,83 @@ def _extract(joints: np.ndarray, dim: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def build_dataset(
-    source: str | Path,
+    source: str | Path | Sequence[str | Path],
     out: str | Path,
     config: BuildConfig | None = None,
     progress: bool = True,
 ) -> BuildReport:
-    """Import every clip of ``source``'s manifest and write a HumanML3D-layout dataset to ``out``.
+    """Import every clip of the sources' manifests and write a HumanML3D-layout dataset to ``out``.
 
-    The folder appears whole or not at all: it is written next to ``out`` and renamed into place.
-    An existing ``out`` is replaced only if it is an earlier build (has build_info.json).
-    Deterministic: the same source and config give byte-identical files.
+    source: one mocap folder or several (each with a ``manifest.csv`` in the same columns; clip ids must
+    not repeat across them). The folder appears whole or not at all: it is written next to ``out`` and
+    renamed into place. An existing ``out`` is replaced only if it is an earlier build (has
+    build_info.json). Deterministic: the same sources and config give byte-identical files.
     """
     config = config or BuildConfig()
     if config.features not in (FEATURE_DIM, FEATURE_DIM_BIOMECH):
         raise PhysmotionError(f"features must be {FEATURE_DIM} or {FEATURE_DIM_BIOMECH}, got {config.features}")
+    folders = [Path(source)] if isinstance(source, (str, Path)) else [Path(s) for s in source]
+    if not folders:
+        raise PhysmotionError("no source folder given")
+    if len({f.resolve() for f in folders}) < len(folders):
+        raise PhysmotionError(f"a source folder is given twice: {', '.join(str(f) for f in folders)}")
     out = Path(out)
     if out.exists() and not (out / BUILD_INFO).is_file():
         raise PhysmotionError(f"{out} exists and is not a physmotion dataset build; choose another --out")
-    clips = [c for c in load_manifest(source) if c.licence_tag not in config.exclude_licences]
+    names = source_names(folders)
+    report = BuildReport(out=out)
+    clips: list[ClipInfo] = []
+    name_of: dict[str, str] = {}  # clip id -> source name
+    for folder, name in zip(folders, names):
+        rows = [c for c in load_manifest(folder) if c.licence_tag not in config.exclude_licences]
+        for c in rows:
+            if c.clip in name_of:
+                raise PhysmotionError(f"clip id {c.clip!r} is in both {name_of[c.clip]} and {name}: ids must be unique")
+            name_of[c.clip] = name
+        licences: dict[str, set[str]] = {}
+        for c in rows:
+            licences.setdefault(c.licence_tag, set()).add(c.licence)
+        report.sources[name] = SourceReport(
+            str(folder), clips=len(rows), licences={t: sorted(v) for t, v in sorted(licences.items())}
+        )
+        clips.extend(rows)
+    where = ", ".join(str(f) for f in folders)
     if not clips:
-        raise PhysmotionError(f"{source}: no clips left to build (all excluded by licence?)")
+        raise PhysmotionError(f"{where}: no clips left to build (all excluded by licence?)")
 
-    report = BuildReport(out=out, num_clips=len(clips))
+    report.num_clips = len(clips)
     results = _run_all(clips, config, progress)
     items: list[_Item] = []
-    for info, result in zip(clips, results):
+    for info, (result, latin1) in zip(clips, results):
+        src = report.sources[name_of[info.clip]]
+        src.latin1 += int(latin1)
         if isinstance(result, str):
             report.skipped[info.clip] = result
         else:
             items.extend(result)
+            src.built += 1
+            src.minutes += sum(i.features.shape[0] - i.padded for i in result if not i.mirrored) / FPS / 60
     if not items:
-        raise PhysmotionError(f"{source}: no clip could be imported")
+        raise PhysmotionError(f"{where}: no clip could be imported")
 
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}."))
     try:
         report.num_items, report.minutes, report.minutes_with_mirrors = _write_layout(tmp, items, config)
+        readmes = tmp / "sources"
+        readmes.mkdir()
+        for folder, name in zip(folders, names):  # attribution and licence terms go with the data (SA)
+            if (folder / "README.md").is_file():
+                shutil.copyfile(folder / "README.md", readmes / f"{name.replace('/', '_')}.md")
         info = {
-            "source": str(Path(source)),
+            "source": str(folders[0]) if len(folders) == 1 else [str(f) for f in folders],
+            "sources": {name: asdict(src) | {"minutes": round(src.minutes, 3)} for name, src in report.sources.items()},
             "config": asdict(config),
             "clips": report.num_clips,
             "items": report.num_items,
             "minutes": round(report.minutes, 3),
             "licence_tags": sorted({i.licence_tag or "open" for i in items}),
+            "padded_clips": sorted({i.clip for i in items if i.padded}),
             "skipped": report.skipped,
         }
         (tmp / BUILD_INFO).write_text(json.dumps(info, indent=2, sort_keys=True) + "\n")
@@ -214,7 +321,9 @@ def build_dataset(
     return report
 
 
-def _run_all(clips: list[ClipInfo], config: BuildConfig, progress: bool) -> list[list[_Item] | str]:
+def _run_all(
+    clips: list[ClipInfo], config: BuildConfig, progress: bool
+) -> list[tuple[list[_Item] | str, bool]]:
     from rich.progress import Progress
 
     jobs = config.jobs or os.cpu_count() or 1
@@ -254,13 +363,13 @@ def _write_layout(root: Path, items: list[_Item], config: BuildConfig) -> tuple[
 
     with open(root / "index.csv", "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["id", "clip", "take", "source", "licence_tag", "split", "start", "end", "mirrored"])
+        w.writerow(["id", "clip", "take", "source", "licence_tag", "split", "start", "end", "mirrored", "padded"])
         for i in items:
             w.writerow([i.id, i.clip, i.take, i.source, i.licence_tag, split_of(i.take, config),
-                        i.start, i.end, int(i.mirrored)])  # fmt: skip
+                        i.start, i.end, int(i.mirrored), i.padded])  # fmt: skip
     counts = {s: len(ids) for s, ids in split_ids.items()}
-    # Minutes of distinct motion: mirrored copies are not counted twice.
-    minutes = sum(i.features.shape[0] for i in items if not i.mirrored) / FPS / 60
+    # Minutes of distinct motion: mirrored copies are not counted twice, frames held by padding not at all.
+    minutes = sum(i.features.shape[0] - i.padded for i in items if not i.mirrored) / FPS / 60
     with_mirrors = sum(i.features.shape[0] for i in items) / FPS / 60
     return counts, minutes, with_mirrors
 

@@ -96,7 +96,7 @@ def measure_clips(
 
 
 def _measure_clip(info: ClipInfo, config: ProjectionConfig | None) -> ClipProjection:
-    motion = import_clip(info)
+    motion = import_clip(info, floor="frame0")  # P's input convention (the importer's default grounds the soles)
     return measure_projection(motion.joints, motion.fps, config)
 
 

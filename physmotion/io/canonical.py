@@ -29,9 +29,10 @@ from scipy.spatial.transform import Rotation
 
 from physmotion.conventions import FPS
 from physmotion.errors import MotionFormatError, PhysmotionError
-from physmotion.io.floor import Grounding, ground
+from physmotion.io.floor import FRAME0, IMPORT_FLOORS, STANCE, Grounding, ground
 from physmotion.io.rigs import RigMotion, RigTable
 from physmotion.skeleton import (
+    FOOT_JOINTS,
     JOINT_INDEX,
     check_bone_lengths,
     facing_direction,
@@ -93,14 +94,18 @@ def canonicalize(
     units: float,
     up_axis: str = "Y",
     drop_tpose: bool = True,
+    floor: str = STANCE,
 ) -> Canonical:
     """Bring a rig motion to the project's conventions (see the module docstring).
 
     rig: in file units and axes; fps: its true frame rate; units: metres per file unit;
-    up_axis: the file's world up axis ("X", "Y" or "Z").
+    up_axis: the file's world up axis ("X", "Y" or "Z"); floor: :data:`~physmotion.io.floor.STANCE`
+    (the stance soles on y = 0) or :data:`~physmotion.io.floor.FRAME0` (the rule before, for P's input).
     """
     if up_axis not in _TO_Y_UP:
         raise PhysmotionError(f"up axis must be one of X, Y, Z, got {up_axis!r}")
+    if floor not in IMPORT_FLOORS:
+        raise PhysmotionError(f"floor must be one of {', '.join(IMPORT_FLOORS)}, got {floor!r}")
     if not (np.isfinite(fps) and fps > 0):
         raise PhysmotionError(f"frame rate must be positive, got {fps}")
     out_frames = (rig.num_frames - 1) * FPS / fps + 1
@@ -128,8 +133,11 @@ def canonicalize(
     rotations, root = inverse_kinematics(rigid, offsets)
     joints = forward_kinematics(rotations, root, offsets)
     misfit = np.linalg.norm(joints - raw, axis=-1)
-    joints, rotations = _place(joints, rotations)
-    joints, grounding = ground(joints, FPS)  # a vertical shift: rotations and offsets keep
+    joints, rotations = _place(joints, rotations, frame0_floor=floor == FRAME0)
+    if floor == FRAME0:
+        grounding = Grounding(0.0, 0.0, 0.0, False)
+    else:
+        joints, grounding = ground(joints, FPS)  # a vertical shift: rotations and offsets keep
     return Canonical(
         joints, rotations, offsets, bool(dropped), misfit.mean(axis=0), misfit.max(axis=0), grounding
     )
@@ -263,13 +271,17 @@ def _rigid_pelvis(joints: np.ndarray) -> np.ndarray:
     return out
 
 
-def _place(joints: np.ndarray, rotations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Origin and facing at frame 0 (a rigid motion of the world, applied to the root too); the floor
-    is :func:`physmotion.io.floor.ground`'s."""
+def _place(
+    joints: np.ndarray, rotations: np.ndarray, frame0_floor: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
+    """Origin and facing at frame 0 (a rigid motion of the world, applied to the root too), and with
+    ``frame0_floor`` frame 0's lowest foot joint on y = 0 (else the floor is
+    :func:`physmotion.io.floor.ground`'s)."""
     forward = facing_direction(joints[0])
     yaw = np.arctan2(forward[0], forward[2])  # angle from +Z to forward, about +Y
     turn = Rotation.from_euler("y", -yaw).as_matrix()
-    shift = np.array([joints[0, 0, 0], 0.0, joints[0, 0, 2]])
+    floor = joints[0, list(FOOT_JOINTS), 1].min() if frame0_floor else 0.0
+    shift = np.array([joints[0, 0, 0], floor, joints[0, 0, 2]])
     placed = (joints - shift) @ turn.T
     rotations = rotations.copy()
     rotations[:, 0] = turn @ rotations[:, 0]

@@ -17,7 +17,7 @@ The importer grounds a motion in that same convention, by one constant vertical 
    the motion is raised just enough to bring it down to the cap.
 
 Every step moves with the motion (percentiles of heights, speeds), so grounding a grounded motion
-changes nothing: an export -> import round trip returns the motion where it was (docs/decisions.md,
+changes nothing: an export -> import round trip returns the motion where it was (docs/decisions/data.md
 "import floor").
 """
 
@@ -38,6 +38,14 @@ STANCE_BAND: float = 0.03
 PENETRATE_CAP: float = 1.5
 """mm: most Penetrate (the metrics' measure, 5 mm tolerance) an imported motion keeps."""
 _TOLERANCE = 0.005  # m: the metrics' Penetrate tolerance (MetricParams.tolerance)
+
+STANCE: str = "stance"
+"""The import floor: the stance soles over the whole clip on y = 0 (this module)."""
+FRAME0: str = "frame0"
+"""The import floor until 2026-11-28: frame 0's lowest foot joint on y = 0. Close to the data convention
+that the physics projection P takes as input (:mod:`physmotion.physics.projection`), and what P's
+benches and tests were measured on, bit for bit."""
+IMPORT_FLOORS: tuple[str, ...] = (STANCE, FRAME0)
 
 
 @dataclass(frozen=True)
@@ -93,3 +101,4 @@ def _highest_floor(lowest: np.ndarray, cap: float) -> float:
     g = (cap * n + np.cumsum(a)) / np.arange(1, n + 1)  # f - tol where the mean over the k lowest is the cap
     fits = np.append(g[:-1] <= a[1:], True)  # ... on its own piece (the first such k is the answer)
     return float(g[np.argmax(fits)] + _TOLERANCE)
+

@@ -16,7 +16,7 @@ from physmotion.errors import MotionFormatError, PhysmotionError
 from physmotion.io.amc import read_amc, read_asf
 from physmotion.io.bvh import Latin1Warning, bvh_joint_names, read_bvh
 from physmotion.io.canonical import canonicalize
-from physmotion.io.floor import Grounding
+from physmotion.io.floor import STANCE, Grounding
 from physmotion.io.mapping import load_mapping
 from physmotion.io.rigs import RIGS, JointSource, RigMotion, RigTable, parse_units, table_from_mapping
 from physmotion.motion import Motion
@@ -110,6 +110,7 @@ def import_clip(
     mapping: Mapping[str, JointSource] | str | Path | None = None,
     asf: str | Path | None = None,
     drop_tpose: bool = True,
+    floor: str = STANCE,
 ) -> Motion:
     """Import a manifest clip, or a bare BVH / AMC file, as a canonical :class:`Motion`.
 
@@ -124,7 +125,9 @@ def import_clip(
     SMPL joint -> rig joint (or blend), or the path of a mapping JSON file
     (:mod:`physmotion.io.mapping`), whose units, up axis and fps rank just after the arguments;
     asf: the skeleton of a bare AMC path (default: the only ``.asf`` next to it, or
-    ``<subject>.asf`` for ``<subject>_<trial>.amc``).
+    ``<subject>.asf`` for ``<subject>_<trial>.amc``); floor: ``"stance"`` (the stance soles on y = 0,
+    :mod:`physmotion.io.floor`) or ``"frame0"`` (frame 0's lowest foot joint: the rule before 2026-11-28,
+    which the physics projection's benches and tests feed P).
     Every failure is a :class:`PhysmotionError` with a one-line message naming the file.
     """
     return import_clip_with_report(
@@ -136,6 +139,7 @@ def import_clip(
         mapping=mapping,
         asf=asf,
         drop_tpose=drop_tpose,
+        floor=floor,
     )[0]
 
 
@@ -151,12 +155,13 @@ def import_clip_with_report(
     mapping: Mapping[str, JointSource] | str | Path | None = None,
     asf: str | Path | None = None,
     drop_tpose: bool = True,
+    floor: str = STANCE,
 ) -> tuple[Motion, ImportReport]:
     """:func:`import_clip`, also returning an :class:`ImportReport`.
 
     Files read as Latin-1 (not UTF-8) are named in one :class:`~physmotion.io.bvh.Latin1Warning`."""
     with _one_latin1_warning():
-        return _import(info_or_path, rig, fps, up_axis, units, mapping, asf, drop_tpose)
+        return _import(info_or_path, rig, fps, up_axis, units, mapping, asf, drop_tpose, floor)
 
 
 @contextmanager
@@ -193,6 +198,7 @@ def _import(
     mapping: Mapping[str, JointSource] | str | Path | None,
     asf: str | Path | None,
     drop_tpose: bool,
+    floor: str,
 ) -> tuple[Motion, ImportReport]:
     info = info_or_path if isinstance(info_or_path, ClipInfo) else None
     path = Path(info.path if info else info_or_path)
@@ -226,7 +232,7 @@ def _import(
             raise PhysmotionError(f"units unknown for rig {table.name!r}: give --units")
         up = _first(up_axis.upper() if up_axis else None, table.up_axis, info.up_axis if info else None, "Y")
         canon = canonicalize(
-            motion, table, float(rate), units=float(metres), up_axis=str(up), drop_tpose=drop_tpose
+            motion, table, float(rate), units=float(metres), up_axis=str(up), drop_tpose=drop_tpose, floor=floor
         )
         result = Motion(
             joints=canon.joints.astype(np.float32),

@@ -293,6 +293,23 @@ _ICLONE = {
     "elbow": "CC_Base_{L}_Forearm", "wrist": "CC_Base_{L}_Hand",
 }  # fmt: skip
 
+_MIXAMO = {  # Adobe Mixamo's rig: "mixamorig:Hips", or the same names without the prefix in many exports
+    "pelvis": "Hips",  # Mixamo's Hips sits between and above the hip joints, as SMPL's pelvis
+    "hip": "{L}UpLeg", "knee": "{L}Leg", "ankle": "{L}Foot", "foot": "{L}ToeBase",
+    "spine1": "Spine", "spine2": "Spine1", "spine3": "Spine2",
+    "neck": "Neck", "head": "Head",
+    "collar": "{L}Shoulder", "shoulder": "{L}Arm", "elbow": "{L}ForeArm", "wrist": "{L}Hand",
+}  # fmt: skip
+
+
+def _prefixed(table: dict[str, JointSource], prefix: str) -> dict[str, JointSource]:
+    """A table with ``prefix`` before every rig node name."""
+    return {
+        joint: prefix + src if isinstance(src, str) else tuple((prefix + n, w) for n, w in src)
+        for joint, src in table.items()
+    }
+
+
 _SMPL22 = {name: name for name in JOINT_NAMES}
 
 RIGS: Mapping[str, RigTable] = MappingProxyType(
@@ -323,6 +340,14 @@ RIGS: Mapping[str, RigTable] = MappingProxyType(
                 note="The rest pose is Z-up (CC_Base_Hip OFFSET 0 0 105), but the root's animated "
                 "rotation turns every frame Y-up: the animated world is Y-up, which is what matters.",
                 source="CMU mocap retargeted to iClone's CC_Base rig (CC_Base_Hip, ...)",
+            ),
+            RigTable(
+                "mixamo", _prefixed(_sided(_MIXAMO, "Left", "Right"), "mixamorig:"), units=_CM, up_axis="Y",
+                source="Adobe Mixamo rig (mixamorig:Hips, mixamorig:LeftUpLeg, ...); BVH exports in cm",
+            ),
+            RigTable(
+                "mixamo_plain", _sided(_MIXAMO, "Left", "Right"), units=_CM, up_axis="Y",
+                source="Mixamo's rig with the prefix stripped (Hips, LeftUpLeg, ...), as many exports write it",
             ),
             RigTable(
                 "smpl22", _SMPL22, units=1.0, up_axis="Y", note="our own BVH export (physmotion.io.export)",

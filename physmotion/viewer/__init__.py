@@ -91,13 +91,13 @@ def view_html(tracks: Sequence[Track], fps: float, title: str = "physmotion view
 
 
 def view_files(paths: Sequence[str | Path], out: str | Path, rig: str | None = None,
-               fps: float | None = None) -> ViewSummary:  # fmt: skip
-    """Write the viewer page of motion files (.npz, or .bvh imported with ``rig`` / ``fps``) to ``out``
+               fps: float | None = None, mapping: str | Path | None = None) -> ViewSummary:  # fmt: skip
+    """Write the viewer page of motion files (.npz, or .bvh imported with ``rig`` / ``fps`` / ``mapping``) to ``out``
     (.html) atomically; nothing is written on a failure."""
     out = Path(out)
     if out.suffix.lower() not in (".html", ".htm"):
         raise PhysmotionError(f"{out}: output must be an .html file")
-    motions = [load_motion(p, rig=rig, fps=fps) for p in paths]
+    motions = [load_motion(p, rig=rig, fps=fps, mapping=mapping) for p in paths]
     labels = short_labels(paths)
     tracks, rate = make_tracks(motions, labels)
     text = view_html(tracks, rate, title=" | ".join(labels))

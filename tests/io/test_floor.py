@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from physmotion.errors import PhysmotionError
 from physmotion.io import ClipInfo, import_clip, import_clip_with_report, save_bvh
 from physmotion.io.floor import PENETRATE_CAP, _highest_floor, ground, stance_frames
 from physmotion.metrics.physical import penetrate
@@ -118,3 +119,15 @@ def test_export_import_round_trip_within_1mm(manifest, hdm05_manifest, tmp_path:
     clip = max(worst, key=worst.get)
     print(f"\nround trip over {len(worst)} clips: max {worst[clip] * 1000:.4f} mm ({clip})")
     assert worst[clip] < 1e-3
+
+
+def test_the_rule_before_is_kept_for_p(clip) -> None:
+    """``floor="frame0"`` (P's input convention): frame 0's lowest foot joint on y = 0, the same motion
+    otherwise; an unknown floor is a one-line error."""
+    info = clip("bandai1_dataset-1_dash_proud_001")
+    stance, frame0 = import_clip(info), import_clip(info, floor="frame0")
+    assert abs(frame0.joints[0, [7, 8, 10, 11], 1].min()) < 1e-6
+    shift = stance.joints - frame0.joints
+    assert np.abs(shift[..., [0, 2]]).max() < 1e-5 and np.ptp(shift[..., 1]) < 1e-5
+    with pytest.raises(PhysmotionError, match="floor must be one of stance, frame0"):
+        import_clip(info, floor="joints")

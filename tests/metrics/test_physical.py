@@ -458,12 +458,10 @@ def test_real_walking_is_nearly_physical(mocap_root: Path) -> None:
 
     infos = {info.clip: info for info in load_manifest(mocap_root)}
     for clip in REAL_WALKS:
-        motion = import_clip(infos[clip])
+        motion = import_clip(infos[clip], floor="frame0")  # the importer's floor when this was written
         # Data puts its floor at the lowest joint (HumanML3D); the body surface puts soles under the
         # toe joints, so raise the data by the default sole depth before asking about penetration.
-        # (The importer grounds the soles itself since 2026-11-28: back to frame 0's lowest foot joint first.)
-        floor = motion.joints[0, [7, 8, 10, 11], 1].min()
-        joints = motion.joints + np.array([0.0, DEFAULT_BODY.sole_below_toe - floor, 0.0], dtype=np.float32)
+        joints = motion.joints + np.array([0.0, DEFAULT_BODY.sole_below_toe, 0.0], dtype=np.float32)
         m = physical_metrics(joints, fps=motion.fps)
         print(clip, {k: round(v, 3) for k, v in m.items()})
         assert m["penetrate"] < 10.0 and m["float"] < 15.0, clip  # mm (CMU feet sit ~1 cm higher)

@@ -102,7 +102,5 @@ def real_walk(mocap_dir: Path) -> np.ndarray:
     from physmotion.io.importer import import_clip, load_manifest
 
     clips = {c.clip: c for c in load_manifest(mocap_dir)}
-    joints = import_clip(clips[REAL_WALK]).joints.astype(np.float64)
-    # the data convention these tests were written for: frame 0's lowest foot joint on y = 0 (the importer
-    # puts the stance soles there since 2026-11-28, docs/decisions.md "import floor")
-    return joints - [0.0, joints[0, [7, 8, 10, 11], 1].min(), 0.0]
+    # P's input convention, which these tests were written for (the importer's default grounds the soles)
+    return import_clip(clips[REAL_WALK], floor="frame0").joints.astype(np.float64)

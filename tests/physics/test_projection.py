@@ -180,7 +180,7 @@ def test_bad_input_is_refused(bad: np.ndarray, match: str) -> None:
 def _clip(mocap_dir, name: str) -> tuple[np.ndarray, float]:
     from physmotion.io.importer import import_clip, load_manifest
 
-    motion = import_clip({c.clip: c for c in load_manifest(mocap_dir)}[name])
+    motion = import_clip({c.clip: c for c in load_manifest(mocap_dir)}[name], floor="frame0")  # P's input
     return motion.joints.astype(np.float64), motion.fps
 
 

@@ -190,8 +190,7 @@ def test_toe_off_is_flattened_only_before_flight(mocap_dir) -> None:
     from physmotion.physics.shaping import flatten_toe_off, flight_frames
 
     info = {c.clip: c for c in load_manifest(mocap_dir)}["bandai1_dataset-1_dash_proud_001"]
-    run = import_clip(info).joints.astype(np.float64)
-    run[..., 1] -= run[0, [7, 8, 10, 11], 1].min()  # the data convention (the importer's floor before 2026-11-28)
+    run = import_clip(info, floor="frame0").joints.astype(np.float64)  # P's input convention
     body = body_from_joints(run)
     model = build_model(body)
     qpos = resample_qpos(joints_to_qpos(run, model, lift=foot_lift(body)), 20.0, 1.0 / DT)
