@@ -322,10 +322,17 @@ def _detect_table(motion: RigMotion, units: str | float | None) -> RigTable:
 
 
 def _find_asf(amc: Path) -> Path:
-    """The ASF of a bare AMC path: ``<subject>.asf`` for ``<subject>_<trial>.amc``, else the sole .asf."""
-    guess = amc.with_name(amc.stem.split("_")[0] + ".asf")
-    if guess.is_file():
-        return guess
+    """The ASF of a bare AMC path: ``<subject>.asf`` for ``<subject>_<trial>.amc`` (CMU), or the longest
+    name prefix of it (HDM05: ``HDM_bd.asf`` for ``HDM_bd_squat1Reps_001_120.amc``), next to it, a folder
+    up, or in an ``asf/`` folder beside either; else the sole .asf next to it."""
+    parts = amc.stem.split("_")
+    folders = [amc.parent, amc.parent.parent, amc.parent / "asf", amc.parent.parent / "asf",
+               amc.parent.parent.parent / "asf"]  # fmt: skip
+    for n in range(len(parts) - 1, 0, -1):  # the longest prefix first
+        for folder in folders:
+            guess = folder / ("_".join(parts[:n]) + ".asf")
+            if guess.is_file():
+                return guess
     candidates = sorted(amc.parent.glob("*.asf")) if amc.parent.is_dir() else []
     if len(candidates) == 1:
         return candidates[0]

@@ -93,3 +93,12 @@ def test_cli_prints_one_warning_line(clip, tmp_path: Path, command: str) -> None
     assert done.returncode == 0, done.stderr
     lines = [ln for ln in done.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("warning: ") and "Latin-1" in lines[0], done.stderr
+
+
+def test_a_bare_hdm05_file_finds_its_actors_asf(hdm05_manifest: list[ClipInfo]) -> None:
+    """``import HDM_bd_..._120.amc`` alone: its skeleton is ``asf/HDM_bd.asf`` of the collection."""
+    info = hdm05_manifest[-1]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        bare, listed = import_clip(info.path, fps=120), import_clip(info)
+    assert np.array_equal(bare.joints, listed.joints) and Path(info.skeleton).name.startswith("HDM_")
