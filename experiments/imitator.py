@@ -1,7 +1,7 @@
 """The learned imitation policy against the model-based tracker, inside P: one table from one run.
 
 Usage: python experiments/imitator.py generated [--seeds 0,1,2] [--categories run,jog,jump,hop,kick]
-       python experiments/imitator.py captured --data data_build/mocap [--split test]
+       python experiments/imitator.py captured [--mocap ../shared/data/mocap,../shared/data/hdm05] [--limit N]
        (either with --policy DIR; default: the shipped one; --out results/imitator_<part>)
 
 generated: the unseen prompts (``eval.prompts.NEW_PROMPTS``) of the fast categories, 6 s each, PhysDiff's
@@ -10,8 +10,9 @@ Per output: Phys-Err (mm) and whether it is below ``none+floor``'s, the projecti
 residual force (fractions of body weight W) and torque (W x 1 m) of the last projection, and the MPJPE of
 the output to the same seed's plain sample (``none``).
 
-captured: every (unmirrored) item of a dataset split, the plain P (no reset: imitation selection), tracker
-and policy: success, MPJPE, root residual, Float and Skate of the simulation against the input's.
+captured: every clip of the mocap folders, the plain P (no reset: imitation selection), per category of
+motion (``eval.projection_quality``, as ``scripts/projection_dynamic.py``): success, MPJPE, Float, Skate
+and Penetrate of the input and of the simulation, root residual force and torque (mean and p95).
 
 Writes ``<out>.md`` (the table) and ``<out>.json`` (per-output rows and a meta block: command, commit,
 CPU, date, P's preset and controller settings).
@@ -114,25 +115,20 @@ def generated(args: argparse.Namespace) -> tuple[list[dict], dict]:
 
 
 def captured(args: argparse.Namespace) -> tuple[list[dict], dict]:
-    from physmotion.imitator.clips import dataset_clips
-    from physmotion.physics.projection import ProjectionConfig, project
+    from physmotion.eval.projection_quality import by_category, measure_clips
+    from physmotion.io.importer import load_manifest
+    from physmotion.physics.projection import ProjectionConfig
 
-    clips = [c for c in dataset_clips(args.data, args.split) if not c.name.startswith("M")]
+    clips = [c for folder in args.mocap.split(",") for c in load_manifest(folder)]
+    if args.limit:
+        clips = clips[:: max(1, len(clips) // args.limit)][: args.limit]
     rows = []
     for ctrl in CONTROLLERS:
-        cfg = _with_controller(ProjectionConfig(), ctrl, args.policy)
         start = time.perf_counter()
-        results = [project(c.joints, c.fps, cfg) for c in clips]
+        measured = measure_clips(clips, _with_controller(ProjectionConfig(), ctrl, args.policy))
         seconds = (time.perf_counter() - start) / len(clips)
-        for c, r in zip(clips, results):
-            sim, inp = _phys(r.simulated, r.body), _phys(c.joints, None)
-            rows.append({
-                "clip": c.name, "controller": ctrl, "success": bool(r.success), "selected": bool(r.selected),
-                "mpjpe_mm": 1000.0 * float(r.mpjpe.mean()), "residual_force": float(r.residual_force.mean()),
-                "residual_torque": float(r.residual_torque.mean()),
-                "float": sim["float"], "skate": sim["skate"], "input_float": inp["float"],
-                "input_skate": inp["skate"], "seconds": seconds,
-            })  # fmt: skip
+        for cat, row in by_category(clips, measured).items():
+            rows.append({"controller": ctrl, "category": cat, **row, "seconds_per_clip": seconds})
         print(f"{ctrl} done", file=sys.stderr, flush=True)
     return rows, _meta(args, "plain (ProjectionConfig())")
 
@@ -161,15 +157,18 @@ def _table(rows: list[dict], part: str) -> str:
                          f"| {mean(sel, 'residual_force_p95'):.3f} | {mean(sel, 'residual_torque'):.3f} "
                          f"| {mean(sel, 'mpjpe_to_sample_mm'):.0f} | {mean(sel, 'seconds'):.2f} |")  # fmt: skip
         return "\n".join(lines)
-    head = ("| P's controller | clips | success | selected | MPJPE mm | residual W | torque W m | Float mm "
-            "(input) | Skate mm (input) | s/clip |")
-    lines = [head, "|---" * 10 + "|"]
-    for ctrl in CONTROLLERS:
-        sel = [r for r in rows if r["controller"] == ctrl]
-        lines.append(f"| {ctrl} | {len(sel)} | {100 * mean(sel, 'success'):.0f} % | {100 * mean(sel, 'selected'):.0f} % "
-                     f"| {mean(sel, 'mpjpe_mm'):.1f} | {mean(sel, 'residual_force'):.3f} "
-                     f"| {mean(sel, 'residual_torque'):.3f} | {mean(sel, 'float'):.1f} ({mean(sel, 'input_float'):.1f}) "
-                     f"| {mean(sel, 'skate'):.1f} ({mean(sel, 'input_skate'):.1f}) | {mean(sel, 'seconds'):.2f} |")  # fmt: skip
+    head = ("| category | P's controller | clips | success | MPJPE mm | Float in→out mm | Skate in→out mm "
+            "| Penetrate in→out mm | residual W mean / p95 | torque W m mean / p95 | s/clip |")
+    lines = [head, "|---" * 11 + "|"]
+    for cat in dict.fromkeys(r["category"] for r in rows):
+        for r in (r for r in rows if r["category"] == cat):
+            lines.append(f"| {cat} | {r['controller']} | {r['clips']} | {100 * r['success']:.1f} % "
+                         f"| {r['mpjpe_mm']:.1f} | {r['float_in']:.2f} → {r['float_out']:.2f} "
+                         f"| {r['skate_in']:.2f} → {r['skate_out']:.2f} "
+                         f"| {r['penetrate_in']:.2f} → {r['penetrate_out']:.2f} "
+                         f"| {r['residual_force_mean']:.3f} / {r['residual_force_p95']:.3f} "
+                         f"| {r['residual_torque_mean']:.3f} / {r['residual_torque_p95']:.3f} "
+                         f"| {r['seconds_per_clip']:.2f} |")  # fmt: skip
     return "\n".join(lines)
 
 
@@ -180,8 +179,9 @@ def main() -> None:
     parser.add_argument("--model", default=None)
     parser.add_argument("--seeds", default="0,1,2")
     parser.add_argument("--categories", default=",".join(FAST))
-    parser.add_argument("--data", default="data_build/mocap")
-    parser.add_argument("--split", default="test")
+    parser.add_argument("--mocap", default="../shared/data/mocap,../shared/data/hdm05",
+                        help="captured: comma-separated mocap folders (each with its manifest.csv)")
+    parser.add_argument("--limit", type=int, default=0, help="captured: only N clips, evenly spread")
     parser.add_argument("--out", default=None)
     args = parser.parse_args()
     rows, meta = generated(args) if args.part == "generated" else captured(args)

@@ -221,6 +221,15 @@ def export_motion(
     console.print(f"wrote {out}", highlight=False)
 
 
+CONTROLLER_HELP = ("Who drives the simulated humanoid: 'tracker' (the model-based tracker) or 'policy' (the "
+                   "learned imitation policy over it, physmotion train imitator).")
+POLICY_HELP = "With --controller policy: the policy folder (the shipped one if left out)."
+
+
+def _opt_str(path: Path | None) -> str | None:
+    return None if path is None else str(path)
+
+
 @app.command("project")
 def project_motion(
     path: Path = typer.Argument(..., help="A motion .npz (joints at any fps)."),
@@ -233,14 +242,17 @@ def project_motion(
     fine_step: bool = typer.Option(False, "--fine-step", help="Simulate at 1/720 s instead of 1/360 s: "
                                    "fast motion lands and pushes off better (captured runs' Float 15.0 -> "
                                    "9.7 mm), for twice the simulation steps; results/projection_dynamic.md."),
+    controller: str = typer.Option("tracker", help=CONTROLLER_HELP),
+    policy: Path | None = typer.Option(None, help=POLICY_HELP),
 ) -> None:
     """Physics projection (PhysDiff's P): imitate the motion with the simulated humanoid."""
     from dataclasses import replace
 
+    from physmotion.metrics.report import residual_line
     from physmotion.motion import Motion
     from physmotion.physics.projection import ProjectionConfig, project
 
-    config = ProjectionConfig(ilc_passes=ilc)
+    config = ProjectionConfig(ilc_passes=ilc).with_controller(controller, _opt_str(policy))
     config = config.at_fine_step() if fine_step else config
     _check_out(out, overwrite)
     motion = Motion.load(path)
@@ -253,11 +265,8 @@ def project_motion(
     kept = "simulation kept" if result.selected else "tracking failed: input kept (flagged)"
     if ilc:
         kept += f" (pass {int(result.ilc_pass)} of {ilc + 1})"
-    console.print(
-        f"wrote {out}: {kept}; MPJPE mean {1000 * result.mpjpe.mean():.0f} mm, "
-        f"root residual mean {result.residual_force.mean():.2f} W",
-        highlight=False,
-    )
+    console.print(f"wrote {out} ({controller}): {kept}; MPJPE mean {1000 * result.mpjpe.mean():.0f} mm, "
+                  f"{residual_line(result.residual)} (W: body weight)", highlight=False)  # fmt: skip
 
 
 @app.command("metrics")
@@ -418,6 +427,8 @@ def generate_cmd(
     fine_step: bool = typer.Option(False, "--fine-step", help="Simulate the projection at 1/720 s instead "
                                    "of 1/360 s: PhysDiff on unseen prompts 12.5 -> 11.2 mm Phys-Err, for "
                                    "1.3-1.4x PhysDiff's time (bench/generate.py)."),
+    controller: str = typer.Option("tracker", help=CONTROLLER_HELP),
+    policy: Path | None = typer.Option(None, help=POLICY_HELP),
     preview: bool = typer.Option(True, help="Write a GIF preview per motion."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace files of the same names instead of "
                                    "refusing (with --no-preview, an old GIF of the same name is removed)."),
@@ -440,6 +451,7 @@ def generate_cmd(
 
     cfg = _with(GenerateConfig(), seconds=seconds, num=num, physics=physics, seed=seed)
     cfg = cfg.at_fine_step() if fine_step else cfg
+    cfg = cfg.with_controller(controller, _opt_str(policy))
     check_outputs(texts, out, cfg, overwrite)
     model = _model_dir(model)
     net = MotionDiffusion.load(model)
@@ -568,6 +580,39 @@ def train_denoiser_cmd(
                   highlight=False)
 
 
+@train_app.command("imitator")
+def train_imitator_cmd(
+    data: list[Path] = typer.Option([], help="Built dataset folder(s) (`data build`): their train split, "
+                                    "mirrored copies included, is imitated; repeat for several."),
+    motions: list[Path] = typer.Option([], help="Folder(s) of generated .npz motions (`generate --physics "
+                                       "none`) to imitate as well: what P is asked to project."),
+    out: Path = typer.Option(..., "-o", "--out", help="Run folder: checkpoint.pt, log.csv, eval.csv, "
+                             "curves.png, policy/. Must be new or empty, unless --resume continues it."),
+    minutes: float | None = typer.Option(None, help="Stop after this many minutes (at a checkpoint)."),
+    iterations: int | None = typer.Option(None, help="Stop after this many more PPO iterations."),
+    envs: int | None = typer.Option(None, help="Parallel episodes (default: 16)."),
+    workers: int | None = typer.Option(None, help="Environment processes, 0: one per core (default: 0)."),
+    device: str = typer.Option("cpu", help="Where the networks train: cpu or cuda (the simulation is on "
+                               "the CPU either way)."),
+    seed: int | None = typer.Option(None, help="Seed (default: 0)."),
+    eval_clips: int = typer.Option(16, "--eval-clips", help="Evaluation set: this many clips, shared "
+                                   "between the sources: the datasets' test splits (unmirrored) and every 8th "
+                                   "motion of --motions (left out of training)."),
+    resume: bool = typer.Option(False, "--resume", help="Continue the run in --out where it stopped."),
+) -> None:
+    """Train the imitation policy P can use (PPO, rsl-rl), in resumable chunks."""
+    from physmotion.imitator.clips import training_sets
+    from physmotion.imitator.train import ImitatorTrainConfig, train_imitator
+
+    clips, evals = training_sets(data, motions, eval_clips)
+    cfg = _with(ImitatorTrainConfig(), num_envs=envs, workers=workers, seed=seed)
+    policy_dir = train_imitator(out, clips, evals, iterations=iterations, minutes=minutes,
+                                resume=resume, config=cfg, device=device,
+                                sources=[str(p) for p in [*data, *motions]], log=console.print)  # fmt: skip
+    console.print(f"policy in {policy_dir}; use it with --controller policy --policy {policy_dir}",
+                  highlight=False)
+
+
 @train_app.command("evaluator")
 def train_evaluator_cmd(
     data: Path = typer.Option(..., help="HumanML3D-layout folder with train (and val, test) splits."),
@@ -613,6 +658,8 @@ def evaluate_cmd(
     cfg_scale: float | None = typer.Option(None, help=CFG_HELP),
     seed: int | None = typer.Option(None, help="Random seed (default: 0)."),
     quick: bool = typer.Option(False, "--quick", help="Smoke run: 32 motions, 2 repeats, 10 steps."),
+    controller: str = typer.Option("tracker", help=CONTROLLER_HELP),
+    policy: Path | None = typer.Option(None, help=POLICY_HELP),
     out: Path = typer.Option(Path("results/evaluate"), "-o", "--out", help="Writes <out>.md and <out>.json."),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
@@ -633,6 +680,7 @@ def evaluate_cmd(
     net, judge = MotionDiffusion.load(model), Evaluator.load(evaluator)
     cfg.base.sampler = _with(default_sampler(net), steps=cfg.base.sampler.steps if quick else steps,
                              sampler=sampler, eta=eta, cfg_scale=cfg_scale)
+    cfg.base = cfg.base.with_controller(controller, _opt_str(policy))
     with _step_bar("evaluating") as tick:
         table = evaluate(net, judge, data, cfg, on_progress=tick)
     paths = table.write(out)
@@ -710,11 +758,14 @@ def morph_synth_cmd(
     seed: int | None = typer.Option(None, help="Random seed of noise and lengths (default: 0)."),
     workers: int | None = typer.Option(None, help="Physics worker processes (0: one per core) (default: 0)."),
     ilc: int | None = typer.Option(None, "--ilc", help=ILC_HELP),
+    controller: str | None = typer.Option(None, help=CONTROLLER_HELP + " (default: tracker)"),
+    policy: Path | None = typer.Option(None, help=POLICY_HELP),
 ) -> None:
     """Generate motions for every train caption and refine each with the physics projection P (Morph)."""
     from physmotion.morph.synth import SynthConfig, synthesize
 
-    cfg = _with(SynthConfig(), per_caption=per_caption, seed=seed, workers=workers, ilc_passes=ilc)
+    cfg = _with(SynthConfig(), per_caption=per_caption, seed=seed, workers=workers, ilc_passes=ilc,
+                controller=controller, policy=_opt_str(policy))  # fmt: skip
     report = synthesize(model, data, out, cfg, progress=sys.stderr.isatty())
     console.print(f"{out}: {report.done} new item(s), {report.total_done}/{report.planned} done in "
                   f"{report.seconds:.0f} s (sampling {report.sampling_seconds:.0f} s, physics "

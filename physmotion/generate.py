@@ -35,6 +35,7 @@ from physmotion.diffusion.samplers import SamplerConfig, sample
 from physmotion.errors import PhysmotionError
 from physmotion.features.humanml3d import recover_from_ric
 from physmotion.motion import Motion, write_atomic
+from physmotion.metrics.report import residual_line
 from physmotion.physics.projection import ProjectionConfig
 from physmotion.physics_mode import FLOOR, MORPH, PHYSDIFF, POST, PhysicsMode
 
@@ -292,12 +293,16 @@ def physics_summary(result: GenerateResult) -> str:
                 + (f"the other {failed} kept the sampled motion (Morph's imitation selection; imitation "
                    f"failure rate {failed / n:.2f})" if failed else "none was kept as sampled"))
     falls, resets = len(log.tracked) - sum(log.tracked), sum(result.resets)
+    residuals = [m.residual for m in result.motions if m.residual is not None]
+    helped = f"; {residual_line(np.concatenate(residuals))} (W: body weight)" if residuals else ""
     if not falls:
         return f"the simulated humanoid followed the motion without falling in all {len(log.tracked)} " \
-            "projections"
+            f"projections{helped}"
+    with_reset = sum(r > 0 for r in result.resets)
     return (f"the simulated humanoid fell in {falls} of {len(log.tracked)} projections; each time it was "
             "put back onto the motion (a reset), which shows as a sudden jump in the output: "
-            f"{resets} such jump(s) in the files written (per file in generate.json, 'resets')")
+            f"{resets} such jump(s) in {with_reset} of {len(result.motions)} files written (per file in "
+            f"generate.json, 'resets'){helped}")
 
 
 def write_outputs(

@@ -83,3 +83,22 @@ def _check(joints: np.ndarray, where: str) -> None:
 def licence_tags(clips: list[ClipSource]) -> list[str]:
     """The licence tags the clips carry (sorted, empty tags left out)."""
     return sorted({c.licence_tag for c in clips if c.licence_tag})
+
+
+def training_sets(data: list[str | Path], motions: list[str | Path], eval_clips: int = 16
+                  ) -> tuple[list[ClipSource], list[ClipSource]]:  # fmt: skip
+    """The clips to train on and the fixed evaluation set, from dataset folders (their train splits; the
+    evaluation takes unmirrored test items) and folders of generated motions (every 8th is held out for
+    evaluation). The evaluation set, at most ``eval_clips``, is shared evenly between the sources."""
+    if not data and not motions:
+        raise PhysmotionError("give at least one --data or --motions folder")
+    clips, evals = [], []
+    per_source = max(1, eval_clips // (len(data) + len(motions)))
+    for folder in data:
+        clips += dataset_clips(folder, "train")
+        evals += [c for c in dataset_clips(folder, "test") if not c.name.startswith("M")][:per_source]
+    for folder in motions:
+        gen = motion_clips(folder)
+        evals += gen[::8][:per_source]
+        clips += [c for i, c in enumerate(gen) if i % 8]
+    return clips, evals[:eval_clips]

@@ -7,7 +7,8 @@ residual-cap curriculum, evaluates a fixed clip set and checkpoints at chunk bou
 Exact resumption: every ``chunk`` iterations all episodes restart from streams seeded by
 ``(seed, iteration)`` and torch is reseeded at every iteration, and checkpoints are written only at those
 boundaries (network, critic, optimiser, normaliser, clip weights, curriculum, counters). A run stopped and
-resumed therefore takes the same steps as one that was not, for the same workers and environments.
+resumed therefore takes the same steps as one that was not, for the same clips, workers and environments
+(resumed on other clips, it fine-tunes: their sampling weights start anew).
 
 A run folder holds ``checkpoint.pt``, ``log.csv`` (one row per iteration), ``eval.csv`` (one row per
 evaluation and cap), ``curves.png`` (with matplotlib) and ``policy/``: the exported policy that P loads
@@ -134,10 +135,14 @@ def train_imitator(
         state = {"iteration": 0, "samples": 0, "wall_s": 0.0, "level": 0.0, "fails": np.zeros(len(clips))}
         if resume:
             saved = torch.load(ckpt_path, weights_only=False, map_location=device)
-            if saved["clips"] != len(clips):
-                raise PhysmotionError(f"the run was trained on {saved['clips']} clips, these are {len(clips)}")
-            alg.load(saved["alg"], None, strict=True)
+            # A checkpoint slimmed for travel may leave the optimiser out: Adam then starts afresh.
+            parts = {"actor": True, "critic": True, "optimizer": "optimizer_state_dict" in saved["alg"]}
+            alg.load(saved["alg"], parts, strict=True)
             state = saved["state"]
+            if saved["clips"] != len(clips):  # fine-tuning on another clip set: its failure record starts anew
+                log(f"the run was trained on {saved['clips']} clips, these are {len(clips)}: clip sampling "
+                    "weights start anew")  # fmt: skip
+                state["fails"] = np.zeros(len(clips))
         else:
             last = [m for m in alg.actor.mlp if isinstance(m, torch.nn.Linear)][-1]
             with torch.no_grad():  # a zero action is the tracker: training starts exactly from it

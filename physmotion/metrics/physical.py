@@ -394,6 +394,8 @@ RECORDED: dict[str, MetricInfo] = {
                    "95th percentile over frames of the root residual force"),
         MetricInfo("residual_torque", "x W m", "PhysDiff (RFC)", "frames", 0, "lower",
                    "mean root residual torque the projection applied, in body weight x 1 m"),
+        MetricInfo("residual_torque_p95", "x W m", "PhysDiff (RFC)", "frames", 0, "lower",
+                   "95th percentile over frames of the root residual torque"),
     )
 }
 """Values a projected motion file records (``Motion.residual``) rather than metrics of its joints; the

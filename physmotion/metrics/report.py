@@ -97,10 +97,22 @@ def to_csv(results: Mapping[str, Mapping[str, float]], paths: Sequence[str | Pat
 
 def residual_summary(motion) -> dict[str, float]:
     """The root residual a projected :class:`~physmotion.motion.Motion` records (``Motion.residual``) as
-    metrics rows: mean and 95th percentile force (x W), mean torque (x W x 1 m); {} for a motion P did not
+    metrics rows: mean and 95th percentile force (x W) and torque (x W x 1 m); {} for a motion P did not
     make."""
     if motion.residual is None:
         return {}
-    force, torque = motion.residual[:, 0].astype(np.float64), motion.residual[:, 1].astype(np.float64)
-    return {"residual_force": float(force.mean()), "residual_force_p95": float(np.percentile(force, 95)),
-            "residual_torque": float(torque.mean())}
+    return residual_stats(motion.residual)
+
+
+def residual_stats(residual: np.ndarray) -> dict[str, float]:
+    """Mean and 95th percentile of a root residual (..., 2): force (x W) and torque (x W x 1 m), over frames."""
+    r = np.asarray(residual, dtype=np.float64).reshape(-1, 2)
+    return {"residual_force": float(r[:, 0].mean()), "residual_force_p95": float(np.percentile(r[:, 0], 95)),
+            "residual_torque": float(r[:, 1].mean()), "residual_torque_p95": float(np.percentile(r[:, 1], 95))}
+
+
+def residual_line(residual: np.ndarray) -> str:
+    """One plain line for a CLI summary: the root residual's mean and p95, force and torque."""
+    s = residual_stats(residual)
+    return (f"root residual force mean {s['residual_force']:.3f} W, p95 {s['residual_force_p95']:.3f} W; "
+            f"torque mean {s['residual_torque']:.3f} W m, p95 {s['residual_torque_p95']:.3f} W m")

@@ -1,0 +1,31 @@
+"""The imitator on the command line: ``train imitator`` and ``--controller`` on ``project``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from physmotion.motion import Motion
+from tests.cli_runner import invoke
+
+
+def test_train_imitator_needs_data(tmp_path: Path) -> None:
+    res = invoke("train", "imitator", "-o", tmp_path / "run", "--iterations", "1")
+    assert res.returncode == 1 and res.stderr.strip() == "error: give at least one --data or --motions folder"
+    res = invoke("train", "imitator", "--data", tmp_path / "nothing", "-o", tmp_path / "run", "--iterations", "1")
+    assert res.returncode == 1 and "not a dataset folder" in res.stderr and "Traceback" not in res.stderr
+    assert not (tmp_path / "run").exists()
+
+
+def test_project_with_the_policy_reports_the_residual(small_built_dir: Path, tmp_path: Path) -> None:
+    joints = np.load(next((small_built_dir / "new_joints").glob("bandai2_dataset-2_walk_normal_001_*.npy")))
+    Motion(joints=joints.astype(np.float32), texts=["a walk"]).save(tmp_path / "walk.npz")
+    res = invoke("project", tmp_path / "walk.npz", "-o", tmp_path / "sim.npz", "--controller", "policy")
+    assert res.returncode == 0, res.stderr
+    assert "(policy)" in res.stdout and "root residual force mean" in res.stdout and "p95" in res.stdout
+    out = Motion.load(tmp_path / "sim.npz")
+    assert out.residual is not None and float(out.residual[:, 0].max()) <= 0.05 + 1e-6  # the policy's cap
+    res = invoke("project", tmp_path / "walk.npz", "-o", tmp_path / "x.npz", "--controller", "pid")
+    assert res.returncode == 1 and "controller must be 'tracker' or 'policy'" in res.stderr
+    assert not (tmp_path / "x.npz").exists()
