@@ -266,7 +266,8 @@ def project_motion(
     if ilc:
         kept += f" (pass {int(result.ilc_pass)} of {ilc + 1})"
     console.print(f"wrote {out} ({controller}): {kept}; MPJPE mean {1000 * result.mpjpe.mean():.0f} mm, "
-                  f"{residual_line(result.residual)} (W: body weight)", highlight=False)  # fmt: skip
+                  f"{residual_line(result.residual)} (W: body weight); a joint's torque over its actuator's "
+                  f"limit in {100 * result.over_limit.mean():.1f} % of frames", highlight=False)  # fmt: skip
 
 
 @app.command("metrics")

@@ -98,7 +98,7 @@ class ImitationEnv:
         clip, cfg, rw = self.clip, self.config, self.config.reward
         a = np.clip(action, -1.0, 1.0)
         controller = _Offset(self._tracker, cfg.settings.action_scale * a)
-        force, torque = control_step(clip.model, self.data, clip.ref, controller, self.k, cfg.humanoid,
+        force, torque, _ = control_step(clip.model, self.data, clip.ref, controller, self.k, cfg.humanoid,
                                      clip.weight)  # fmt: skip
         self.k += 1
         k, data, ref = self.k, self.data, clip.ref

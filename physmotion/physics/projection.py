@@ -152,6 +152,9 @@ class ProjectedMotion:
     ``unsupported_seconds``); a motion that does is rejected by imitation selection whatever its MPJPE.
     body: (B, 22, 3) float64 rest offsets of the humanoid each motion was simulated with (bone lengths,
     fitted feet): the surface to measure the simulated motion on (``HumanoidSurface(body)``).
+    over_limit: (B, T) bool, frames in which a hinge's total torque (actuator plus the joint torques the
+    tracker's feet-balance path applies directly) passed the actuator's force limit: the actuators alone
+    are bounded, that path is not (:func:`~physmotion.physics.sim.control_step`).
     """
 
     joints: np.ndarray
@@ -166,6 +169,7 @@ class ProjectedMotion:
     resets: np.ndarray
     grounded: np.ndarray
     ilc_pass: np.ndarray
+    over_limit: np.ndarray
 
     @property
     def residual(self) -> np.ndarray:
@@ -336,4 +340,5 @@ def _back_to_input_rate(
         "success": np.array(success),
         "selected": np.array(selected),
         "resets": np.array(roll.resets),
+        "over_limit": roll.over_limit[nearest],
     }

@@ -34,6 +34,8 @@ class Rollout:
     resets: how many times the humanoid was put back on the reference (``reset_on_fail``).
     shifts: how many times the rest of the reference was moved to where the body had drifted
     (``follow_drift``) or let land (``let_land``).
+    over_limit: (N,) bool, control steps in which a hinge's actuator force plus the joint torque applied
+    directly (``qfrc_applied``: the tracker's feet-balance path) passed the actuator's force limit.
     """
 
     qpos: np.ndarray
@@ -44,6 +46,7 @@ class Rollout:
     failed_at: int | None
     resets: int = 0
     shifts: int = 0
+    over_limit: np.ndarray | None = None  # (N,) bool: a hinge's total torque passed its actuator's limit
 
 
 def _quiet_mujoco_warnings() -> None:
@@ -110,6 +113,7 @@ def simulate(
     qpos = np.zeros((n, model.nq))
     mpjpe = np.zeros(n)
     res_f, res_t = np.zeros(n), np.zeros(n)
+    over = np.zeros(n, dtype=bool)
     contacts = np.zeros((n, 4), dtype=bool)
     weight = float(model.body_subtreemass[0]) * STANDARD_GRAVITY
     reset_state(model, data, ref)
@@ -138,8 +142,8 @@ def simulate(
             break
         if k == n - 1:
             break
-        res_f[k + 1], res_t[k + 1] = control_step(model, data, ref, controller, k, cfg, weight)
-    return Rollout(qpos, mpjpe, res_f, res_t, contacts, failed_at, resets, shifts)
+        res_f[k + 1], res_t[k + 1], over[k + 1] = control_step(model, data, ref, controller, k, cfg, weight)
+    return Rollout(qpos, mpjpe, res_f, res_t, contacts, failed_at, resets, shifts, over)
 
 
 def control_step(
@@ -147,7 +151,9 @@ def control_step(
 ) -> tuple[float, float]:
     """Advance ``data`` over control step k -> k+1 under ``controller``: its controls held, its root
     residual recomputed every ``config.residual_every`` simulation steps. Returns the mean residual force
-    and torque over the step as fractions of ``weight`` (N) and ``weight`` x 1 m."""
+    and torque over the step as fractions of ``weight`` (N) and ``weight`` x 1 m, and whether any hinge's
+    total torque (its actuator's force plus the joint torque the controller applies directly, as the
+    feet-balance path does) passed the actuator's limit at one of the residual updates."""
     import mujoco
 
     every = config.residual_every  # sim steps per root-residual update (one mj_step call of that many)
@@ -155,6 +161,8 @@ def control_step(
     data.ctrl[:] = ctrl
     data.qfrc_applied[:] = qfrc
     force = torque = 0.0
+    over = False
+    limits = model.actuator_forcerange[:, 1]  # actuator i drives hinge dof 6 + i (humanoid.build_mjcf)
     for s in range(every, config.substeps + 1, every):
         # The wrench held over simulation steps s - every + 1 .. s is the one ending at step s.
         applied = qfrc + controller.residual(data, ref, k * config.substeps + s, config.substeps)
@@ -163,8 +171,10 @@ def control_step(
         force += math.hypot(*wrench[:3])
         torque += math.hypot(*wrench[3:])
         mujoco.mj_step(model, data, every)
+        if applied[6:].any():
+            over = over or bool(np.any(np.abs(data.actuator_force + applied[6:]) > 1.001 * limits))
     updates = config.substeps // every
-    return force / weight / updates, torque / weight / updates
+    return force / weight / updates, torque / weight / updates, over
 
 
 def contacts_of(model, data, foot_bodies: np.ndarray) -> np.ndarray:
