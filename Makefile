@@ -1,5 +1,6 @@
 # Entry points (see README): `make demo` generates motion from text with the shipped model,
-# `make data` builds the datasets from the bundled mocap (and with HDM05), `make test` runs the whole test suite.
+# `make data` builds the datasets from the bundled mocap (and with HDM05), `make test` runs the whole test suite
+# (both tiers, in 2 pytest-xdist workers), `make test-fast` the fast tier alone (what plain `pytest` runs).
 # All create or reuse the venv in .venv; torch is installed first, pinned to the CPU build on disk.
 VENV ?= .venv
 PY := $(VENV)/bin/python
@@ -17,7 +18,7 @@ $(VENV)/.installed: pyproject.toml
 	touch $@
 	@echo "installed: run $(VENV)/bin/physmotion --help"
 
-.PHONY: install demo data test browser render-png
+.PHONY: install demo data test test-fast browser render-png
 install: $(VENV)/.installed
 
 demo: $(VENV)/.installed
@@ -35,7 +36,12 @@ data: $(VENV)/.installed
 browser:
 	command -v chromium >/dev/null || (apt-get update -qq && apt-get install -y -qq chromium)
 
+# Both tiers (tests/README.md): the fast one and the `slow` one, in 2 workers that build each shared fixture once.
 test: $(VENV)/.installed browser
+	$(PY) -m pytest -q -n 2 -m "slow or not slow" --durations=20
+
+# The fast tier alone, as plain `pytest` runs it (at most 3 min on 2 cores); needs no browser.
+test-fast: $(VENV)/.installed
 	$(PY) -m pytest -q
 
 # docs/render.png (README): a captured walk beside its physics projection, frame 100 of `physmotion render`.

@@ -1,10 +1,27 @@
 """Shared fixtures: the real mocap folder, every manifest clip imported and the dataset built once per
-session, and tiny training runs on it."""
+session, and tiny training runs on it.
+
+Two tiers (see tests/README.md): the default ``pytest`` deselects tests marked ``slow``; ``make test``
+runs both, in two pytest-xdist workers. A test whose fixtures build or import the whole mocap collection
+(``built``, ``built_dir``, ``built329_dir``, ``import_results``, ``imported_clips``) is marked slow here
+(:func:`pytest_collection_modifyitems`); the fast tier builds :data:`SMALL_CLIPS`, a few real clips
+of every source and split, instead (``small_built_dir``, ``small_built329_dir``), and trains its tiny
+models on them.
+
+Every directory fixture of a whole session is built once per test run, whatever the number of xdist
+workers: the first worker builds it under a file lock in the run's shared temporary folder, the others
+wait for it and read it (:func:`_shared_dir`). Tests only read these folders.
+"""
 
 from __future__ import annotations
 
+import contextlib
+import csv
+import os
+import pickle
 import shutil
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -17,8 +34,49 @@ from physmotion.diffusion.train import TrainConfig
 MOCAP_DIR = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "mocap"
 
 
+# Fixtures that import or build the whole mocap collection (minutes on 2 cores): their tests are slow.
+WHOLE_COLLECTION = frozenset({"import_results", "imported_clips", "built", "built_dir", "built329_dir"})
+
+
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "slow: runs over the whole mocap manifest (seconds); still run in CI")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Mark slow every test that needs the whole collection imported or built."""
+    for item in items:
+        if WHOLE_COLLECTION.intersection(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.slow)
+
+
+@contextlib.contextmanager
+def _locked(path: Path) -> Iterator[None]:
+    from filelock import FileLock
+
+    with FileLock(str(path) + ".lock"):
+        yield
+
+
+def _run_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The temporary folder all xdist workers of this run share (each worker's basetemp is under it)."""
+    base = tmp_path_factory.getbasetemp()
+    return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+
+
+def _shared_dir(tmp_path_factory: pytest.TempPathFactory, name: str, make: Callable[[Path], None]) -> Path:
+    """``<run root>/shared/<name>``, made once per test run by ``make(folder)``: under xdist the first
+    worker to ask makes it while holding a lock, the others wait and reuse it. ``make`` writes into the
+    empty folder it is given; a ``.done`` file marks it complete, so a failed attempt is retried."""
+    root = _run_root(tmp_path_factory) / "shared"
+    root.mkdir(exist_ok=True)
+    folder = root / name
+    with _locked(folder):
+        if not (folder / ".done").is_file():
+            shutil.rmtree(folder, ignore_errors=True)
+            folder.mkdir()
+            make(folder)
+            (folder / ".done").write_text("")
+    return folder
 
 
 @pytest.fixture(scope="session")
@@ -30,7 +88,7 @@ def mocap_dir() -> Path:
 
 
 @pytest.fixture(scope="session")
-def import_results(mocap_dir: Path) -> dict[str, object]:
+def import_results(mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     """clip id -> (Motion, ImportReport), or the one-line error message; imports the manifest once.
 
     The wall time of the whole import is stored under the key ``"__seconds__"``.
@@ -38,15 +96,19 @@ def import_results(mocap_dir: Path) -> dict[str, object]:
     from physmotion.errors import PhysmotionError
     from physmotion.io import import_clip_with_report, load_manifest
 
-    results: dict[str, object] = {}
-    start = time.perf_counter()
-    for info in load_manifest(mocap_dir):
-        try:
-            results[info.clip] = import_clip_with_report(info)
-        except PhysmotionError as exc:
-            results[info.clip] = str(exc)
-    results["__seconds__"] = time.perf_counter() - start
-    return results
+    def make(folder: Path) -> None:
+        results: dict[str, object] = {}
+        start = time.perf_counter()
+        for info in load_manifest(mocap_dir):
+            try:
+                results[info.clip] = import_clip_with_report(info)
+            except PhysmotionError as exc:
+                results[info.clip] = str(exc)
+        results["__seconds__"] = time.perf_counter() - start
+        (folder / "results.pickle").write_bytes(pickle.dumps(results))
+
+    # Imported once per run; xdist workers other than the first read the pickled results.
+    return pickle.loads((_shared_dir(tmp_path_factory, "import", make) / "results.pickle").read_bytes())
 
 
 @pytest.fixture(scope="session")
@@ -59,14 +121,88 @@ def imported_clips(import_results: dict[str, object]) -> dict[str, object]:
 
 @pytest.fixture(scope="session")
 def built(tmp_path_factory: pytest.TempPathFactory, mocap_dir: Path) -> BuildReport:
-    """The whole mocap collection built with the default options (about 12 s)."""
-    out = tmp_path_factory.mktemp("build") / "mocap"
-    return build_dataset(mocap_dir, out, BuildConfig(), progress=False)
+    """The whole mocap collection built with the default options (about 12 s on 8 cores, 1-2 min on 2)."""
+
+    def make(folder: Path) -> None:
+        report = build_dataset(mocap_dir, folder / "mocap", BuildConfig(), progress=False)
+        (folder / "report.pickle").write_bytes(pickle.dumps(report))
+
+    return pickle.loads((_shared_dir(tmp_path_factory, "build", make) / "report.pickle").read_bytes())
 
 
 @pytest.fixture(scope="session")
 def built_dir(built: BuildReport) -> Path:
     return built.out
+
+
+# --- the fast tier's data: a build of a few real clips of every source and split ---
+
+SMALL_CLIPS = (
+    # train
+    "bandai2_dataset-2_walk_normal_001", "bandai2_dataset-2_run_normal_001",
+    "bandai2_dataset-2_wave-right-hand_normal_001", "bandai2_dataset-2_walk-turn-left_normal_001",
+    "bandai1_dataset-1_bow_active_001", "cmu_02_01", "cmuiclone_02_01",
+    "cmu_02_03",  # 29 frames, under the 2 s minimum: the build's short-clip rule applies
+    "bandai2_dataset-2_walk_normal_002", "bandai2_dataset-2_walk_normal_003", "bandai2_dataset-2_run_normal_002",
+    "bandai2_dataset-2_run_normal_003",
+    "bandai2_dataset-2_walk-turn-left_normal_002", "bandai2_dataset-2_walk-turn-right_normal_002",
+    "bandai2_dataset-2_walk-turn-right_normal_003", "bandai2_dataset-2_wave-right-hand_masculine_001",
+    "bandai2_dataset-2_wave-both-hands_normal_001",  # a train split of at least a batch (32) for the evaluator
+    # val
+    "bandai2_dataset-2_walk-turn-left_youthful_001", "bandai2_dataset-2_wave-both-hands_masculine_001",
+    "bandai2_dataset-2_walk_feminine_001",
+    # test
+    "bandai2_dataset-2_walk-turn-right_normal_001", "bandai2_dataset-2_wave-left-hand_elderly_001",
+    "bandai2_dataset-2_wave-right-hand_feminine_001",
+)  # fmt: skip
+
+
+def small_manifest(mocap_dir: Path, out: Path, clips: tuple[str, ...] = SMALL_CLIPS) -> Path:
+    """A mocap folder ``out`` whose manifest lists only ``clips`` of ``mocap_dir``'s, with absolute
+    paths into ``mocap_dir`` (nothing is copied)."""
+    out.mkdir(parents=True, exist_ok=True)
+    with open(mocap_dir / "manifest.csv", newline="", encoding="utf-8") as f:
+        reader = csv.DictReader(f)
+        rows = [r for r in reader if r["clip"] in clips]
+        fields = reader.fieldnames
+    assert sorted(r["clip"] for r in rows) == sorted(clips), "a clip of the small set left the manifest"
+    for r in rows:
+        r["path"] = str(mocap_dir / r["path"])
+        if r["format"].lower() == "amc":
+            r["skeleton"] = str(mocap_dir / r["skeleton"])
+    with open(out / "manifest.csv", "w", newline="", encoding="utf-8") as f:
+        w = csv.DictWriter(f, fieldnames=fields)
+        w.writeheader()
+        w.writerows(rows)
+    return out
+
+
+@pytest.fixture(scope="session")
+def small_mocap_dir(mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A mocap folder of the :data:`SMALL_CLIPS` (a manifest pointing into ../shared/data/mocap)."""
+    return _shared_dir(tmp_path_factory, "small_mocap", lambda folder: small_manifest(mocap_dir, folder))
+
+
+@pytest.fixture(scope="session")
+def small_built_dir(small_mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """:data:`SMALL_CLIPS` built with the default options: every split, both licence tags, mirrors."""
+
+    def make(folder: Path) -> None:
+        build_dataset(small_mocap_dir, folder / "mocap", BuildConfig(jobs=1), progress=False)
+
+    return _shared_dir(tmp_path_factory, "small_build", make) / "mocap"
+
+
+@pytest.fixture(scope="session")
+def small_built329_dir(small_mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """:data:`SMALL_CLIPS` built with 329-d features and the muscle-activation cache."""
+    from physmotion.data.build import build_activations
+
+    def make(folder: Path) -> None:
+        build_dataset(small_mocap_dir, folder / "mocap", BuildConfig(features=329, jobs=1), progress=False)
+        build_activations(folder / "mocap", progress=False, jobs=1)
+
+    return _shared_dir(tmp_path_factory, "small_build329", make) / "mocap"
 
 
 # --- tiny training runs on the real bundled data (diffusion and generation tests) ---
@@ -83,30 +219,39 @@ def tiny_config(data: Path, out: Path, **kw) -> TrainConfig:
 @pytest.fixture(scope="session")
 def one_clip_dir(built_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A HumanML3D-layout folder whose train split is one real walking window, eight times over."""
-    out = tmp_path_factory.mktemp("one_clip")
-    for sub in ("new_joint_vecs", "texts"):
-        (out / sub).mkdir()
-    ids = (built_dir / "train.txt").read_text().split()
-    pick = next(i for i in ids if "walk_normal" in i and not i.startswith("M"))
-    feats = np.load(built_dir / "new_joint_vecs" / f"{pick}.npy")[:64]
-    names = [f"copy{k}" for k in range(8)]
-    for name in names:
-        np.save(out / "new_joint_vecs" / f"{name}.npy", feats)
-        (out / "texts" / f"{name}.txt").write_text("a person walks forward\n")
-    (out / "train.txt").write_text("\n".join(names) + "\n")
-    for f in ("Mean.npy", "Std.npy", "build_info.json"):
-        shutil.copy(built_dir / f, out / f)
-    return out
+
+    def make(out: Path) -> None:
+        for sub in ("new_joint_vecs", "texts"):
+            (out / sub).mkdir()
+        ids = (built_dir / "train.txt").read_text().split()
+        pick = next(i for i in ids if "walk_normal" in i and not i.startswith("M"))
+        feats = np.load(built_dir / "new_joint_vecs" / f"{pick}.npy")[:64]
+        names = [f"copy{k}" for k in range(8)]
+        for name in names:
+            np.save(out / "new_joint_vecs" / f"{name}.npy", feats)
+            (out / "texts" / f"{name}.txt").write_text("a person walks forward\n")
+        (out / "train.txt").write_text("\n".join(names) + "\n")
+        for f in ("Mean.npy", "Std.npy", "build_info.json"):
+            shutil.copy(built_dir / f, out / f)
+
+    return _shared_dir(tmp_path_factory, "one_clip", lambda folder: make(_mkdir(folder / "data"))) / "data"
+
+
+def _mkdir(path: Path) -> Path:
+    path.mkdir()
+    return path
 
 
 @pytest.fixture(scope="session")
-def tiny_model_dir(built_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A tiny denoiser trained for a few steps on the bundled data: real weights, not a useful model."""
+def tiny_model_dir(small_built_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A tiny denoiser trained for a few steps on the small build: real weights, not a useful model."""
     from physmotion.diffusion.train import train_denoiser
 
-    out = tmp_path_factory.mktemp("tiny_model")
-    train_denoiser(tiny_config(built_dir, out, steps=10, d_model=32, layers=1), progress=False)
-    return out
+    def make(folder: Path) -> None:
+        train_denoiser(tiny_config(small_built_dir, folder / "model", steps=10, d_model=32, layers=1),
+                       progress=False)  # fmt: skip
+
+    return _shared_dir(tmp_path_factory, "tiny_model", make) / "model"
 
 
 @pytest.fixture(scope="session")
@@ -128,13 +273,14 @@ def tiny_evaluator_config(data: Path, out: Path, **kw):
 
 
 @pytest.fixture(scope="session")
-def tiny_evaluator_dir(built_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A small evaluator trained for 3 epochs on the bundled data: real weights, a weak evaluator."""
+def tiny_evaluator_dir(small_built_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A small evaluator trained for 3 epochs on the small build: real weights, a weak evaluator."""
     from physmotion.eval.train import train_evaluator
 
-    out = tmp_path_factory.mktemp("tiny_evaluator") / "evaluator"
-    train_evaluator(tiny_evaluator_config(built_dir, out), progress=False)
-    return out
+    def make(folder: Path) -> None:
+        train_evaluator(tiny_evaluator_config(small_built_dir, folder / "evaluator"), progress=False)
+
+    return _shared_dir(tmp_path_factory, "tiny_evaluator", make) / "evaluator"
 
 
 @pytest.fixture(scope="session")
@@ -153,10 +299,11 @@ def built329_dir(tmp_path_factory: pytest.TempPathFactory, mocap_dir: Path) -> P
     muscle-activation cache, as ``data build --features 329 --activations`` makes it (about 30 s)."""
     from physmotion.data.build import build_activations
 
-    out = tmp_path_factory.mktemp("build329") / "mocap"
-    build_dataset(mocap_dir, out, BuildConfig(features=329), progress=False)
-    build_activations(out, progress=False)
-    return out
+    def make(folder: Path) -> None:
+        build_dataset(mocap_dir, folder / "mocap", BuildConfig(features=329), progress=False)
+        build_activations(folder / "mocap", progress=False)
+
+    return _shared_dir(tmp_path_factory, "build329", make) / "mocap"
 
 
 def tiny_biomo_config(data: Path, out: Path, **kw) -> TrainConfig:
@@ -170,13 +317,14 @@ def tiny_biomo_config(data: Path, out: Path, **kw) -> TrainConfig:
 
 
 @pytest.fixture(scope="session")
-def tiny_biomo_dir(built329_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A tiny biomo model trained for 10 steps on the 329-d build: real weights, not a useful model."""
+def tiny_biomo_dir(small_built329_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A tiny biomo model trained for 10 steps on the small 329-d build: real weights, not a useful model."""
     from physmotion.diffusion.train import train_denoiser
 
-    out = tmp_path_factory.mktemp("tiny_biomo")
-    train_denoiser(tiny_biomo_config(built329_dir, out), progress=False)
-    return out
+    def make(folder: Path) -> None:
+        train_denoiser(tiny_biomo_config(small_built329_dir, folder / "model"), progress=False)
+
+    return _shared_dir(tmp_path_factory, "tiny_biomo", make) / "model"
 
 
 @pytest.fixture(scope="session")

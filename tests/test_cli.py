@@ -1,22 +1,23 @@
-"""The command line, run as a user runs it: a subprocess, its exit code, stdout/stderr and files."""
+"""The command line, run as a user runs it: its exit code, stdout/stderr and files. The commands run in
+the test process (tests/cli_runner.py); tests/test_cli_process.py checks a real process agrees."""
 
 import json
 import re
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from physmotion.motion import Motion
+from tests.cli_runner import invoke
 
 BANDAI_WALK = "bandai/Bandai-Namco-Research-Motiondataset-2/data/dataset-2_walk_normal_001.bvh"
 
 
-def run(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "physmotion.cli", *map(str, args)],
-                          capture_output=True, text=True, timeout=600)
+def run(*args: object) -> subprocess.CompletedProcess:
+    """``physmotion ARGS...`` in this process (see tests/cli_runner.py)."""
+    return invoke(*args)
 
 
 def _bad_bvh_files(mocap_dir: Path, tmp: Path) -> dict[str, Path]:
@@ -156,8 +157,7 @@ def test_project_writes_the_simulated_motion(mocap_dir: Path, tmp_path: Path) ->
 
 def _help_defaults(*command: str) -> dict[str, str]:
     """``--option -> default`` as the help of a command states them ("(default: X).")."""
-    res = subprocess.run([sys.executable, "-m", "physmotion.cli", *command, "--help"], capture_output=True,
-                         text=True, timeout=120)
+    res = run(*command, "--help")
     assert res.returncode == 0, res.stderr
     found: dict[str, str] = {}
     for block in re.split(r"\n\s*(?=(?:-\w, )?--[a-z])", res.stdout):  # one block per option, unwrapped

@@ -1,4 +1,5 @@
-"""A user's first hour with the command line (issue 24, part A), run through the installed console script:
+"""A user's first hour with the command line (issue 24, part A), run through the console script's ``main``
+in this process (tests/cli_runner.py; tests/test_cli_process.py checks the installed script agrees):
 metrics of same-named files, unknown-word warnings, output paths checked before any work, run folders that
 never clobber, and the small things (--version, -h, -o, limits in the help, warnings)."""
 
@@ -20,15 +21,18 @@ from physmotion.errors import PhysmotionWarning
 from physmotion.metrics.report import check_npz, fit_table, path_labels, table_width, to_csv, to_json
 from physmotion.motion import Motion
 from physmotion.paths import OutputPathError, check_output
+from tests.cli_runner import invoke
 
 PHYSMOTION = Path(sys.executable).parent / "physmotion"
 BANDAI_WALK = "bandai/Bandai-Namco-Research-Motiondataset-2/data/dataset-2_walk_normal_001.bvh"
 CHEAP = ("--seconds", "2", "--steps", "5", "--physics", "none")
 
 
-def cli(*args: object, timeout: int = 600) -> subprocess.CompletedProcess:
-    """The console script as a user types it, in a pipe (so rich sees an 80-column non-terminal)."""
-    return subprocess.run([str(PHYSMOTION), *map(str, args)], capture_output=True, text=True, timeout=timeout)
+def cli(*args: object, timeout: int = 600, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    """The console script's ``main`` as a user types it, in this process with its output captured (so
+    rich sees an 80-column non-terminal, as in a pipe); see tests/cli_runner.py. ``timeout`` is kept
+    for the callers' sake: an in-process call has none."""
+    return invoke(*args, cwd=cwd)
 
 
 def one_line_error(res: subprocess.CompletedProcess) -> str:
@@ -103,8 +107,7 @@ def test_json_and_csv_keep_every_file(three_x: Path) -> None:
 
 
 def test_cli_metrics_same_named_files_stay_apart(three_x: Path) -> None:
-    res = subprocess.run([str(PHYSMOTION), "metrics", "a/x.npz", "b/x.npz", "c/x.npz"], cwd=three_x,
-                         capture_output=True, text=True, timeout=600)  # fmt: skip
+    res = cli("metrics", "a/x.npz", "b/x.npz", "c/x.npz", cwd=three_x)
     assert res.returncode == 0, res.stderr
     out = res.stdout
     assert "…" not in out and max(len(line) for line in out.splitlines()) <= 80  # fits the pipe's 80 columns

@@ -1,7 +1,6 @@
 """`physmotion render` as a user runs it: GIF / MP4 / PNG of imported motions, side by side or overlaid."""
 
 import subprocess
-import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -11,15 +10,14 @@ from PIL import Image
 
 from physmotion.motion import Motion
 from physmotion.render import CONTACT_COLOUR, motion_contacts, short_labels
+from tests.cli_runner import invoke
 
 BANDAI_WALK = "bandai/Bandai-Namco-Research-Motiondataset-2/data/dataset-2_walk_normal_001.bvh"
-CLI = Path(sys.executable).parent / "physmotion"
 
 
 def run(*args: object) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [str(CLI), *map(str, args)], capture_output=True, text=True, timeout=600, check=False
-    )
+    """``physmotion ARGS...`` in this process (see tests/cli_runner.py)."""
+    return invoke(*args)
 
 
 @pytest.fixture(scope="module")

@@ -5,7 +5,6 @@ import json
 import re
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -13,9 +12,9 @@ import pytest
 from PIL import Image
 
 from physmotion.motion import Motion
+from tests.cli_runner import invoke
 
 BANDAI_WALK = "bandai/Bandai-Namco-Research-Motiondataset-2/data/dataset-2_walk_normal_001.bvh"
-CLI = Path(sys.executable).parent / "physmotion"
 # SwiftShader's notes about reading back its own frames (the screenshot), not messages of the page.
 DRIVER_NOTE = "GL Driver Message (OpenGL, Performance"
 
@@ -47,13 +46,13 @@ def _figure_centre(path: Path) -> tuple[np.ndarray, int]:
     return np.array([xs.mean(), ys.mean()]), int(coloured.sum())
 
 
+@pytest.mark.slow  # headless Chromium (installed by `make test`), three page loads
 def test_view_page_plays_a_walk_in_headless_chromium(mocap_dir: Path, tmp_path: Path) -> None:
     walk = tmp_path / "walk.npz"
-    res = subprocess.run([CLI, "import", mocap_dir / BANDAI_WALK, "-o", walk, "--rig", "bandai", "--fps", "30"],
-                         capture_output=True, text=True, check=False)  # fmt: skip
+    res = invoke("import", mocap_dir / BANDAI_WALK, "-o", walk, "--rig", "bandai", "--fps", "30")
     assert res.returncode == 0, res.stderr
     page = tmp_path / "view.html"
-    res = subprocess.run([CLI, "view", walk, "-o", page], capture_output=True, text=True, check=False)
+    res = invoke("view", walk, "-o", page)
     assert res.returncode == 0, res.stderr
     text = page.read_text()
     # Self-contained: no external script, style or fetch.
@@ -89,6 +88,7 @@ def test_view_page_plays_a_walk_in_headless_chromium(mocap_dir: Path, tmp_path: 
     assert grey_lines > 2000, grey_lines
 
 
+@pytest.mark.slow  # headless Chromium (installed by `make test`)
 def test_a_broken_page_is_caught(tmp_path: Path) -> None:
     """The checks above can fail: a page whose script throws shows up in the console and the status."""
     from physmotion.render import make_tracks

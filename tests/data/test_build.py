@@ -1,8 +1,6 @@
 import csv
 import json
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -25,8 +23,7 @@ from physmotion.errors import PhysmotionError, ShapeError
 from physmotion.features.humanml3d import FEATURE_DIM, recover_from_ric
 from physmotion.io.importer import load_manifest
 from physmotion.physics.activations import ACTIVATION_CHANNELS, activations
-
-pytestmark = pytest.mark.slow
+from tests.cli_runner import invoke
 
 
 def _index(root: Path) -> list[dict]:
@@ -99,6 +96,7 @@ def test_mirrored_copies_have_mirrored_captions(built_dir: Path) -> None:
     assert mirror_text("Turns Left then right") == "Turns Right then left"
 
 
+@pytest.mark.slow  # a second build of the whole collection
 def test_two_builds_are_identical(built_dir: Path, mocap_dir: Path, tmp_path: Path) -> None:
     again = build_dataset(mocap_dir, tmp_path / "again", BuildConfig(), progress=False).out
     for name in ("train.txt", "val.txt", "test.txt", "index.csv", "Mean.npy", "Std.npy"):
@@ -107,6 +105,7 @@ def test_two_builds_are_identical(built_dir: Path, mocap_dir: Path, tmp_path: Pa
     assert (a.items, a.minutes, a.vocabulary) == (b.items, b.minutes, b.vocabulary)
 
 
+@pytest.mark.slow  # builds every CMU clip of the collection
 def test_exclude_non_commercial(mocap_dir: Path, tmp_path: Path) -> None:
     out = build_dataset(mocap_dir, tmp_path / "open", BuildConfig(exclude_licences=("NC",)), progress=False).out
     rows = _index(out)
@@ -226,9 +225,7 @@ def test_missing_activation_cache_is_a_one_line_error(small_build: Path, tmp_pat
 
 def test_cli_build_with_activations(few_clips: Path, small_build: Path, tmp_path: Path) -> None:
     out = tmp_path / "cli"
-    res = subprocess.run([sys.executable, "-m", "physmotion.cli", "data", "build", "--source", str(few_clips),
-                          "-o", str(out), "--jobs", "1", "--activations"],
-                         capture_output=True, text=True, timeout=600, check=False)  # fmt: skip
+    res = invoke("data", "build", "--source", few_clips, "-o", out, "--jobs", "1", "--activations")
     assert res.returncode == 0, res.stderr
     assert "activations for" in res.stdout
     for path in (small_build / "activations").glob("*.npy"):  # the same as the library's cache

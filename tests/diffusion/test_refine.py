@@ -1,7 +1,6 @@
 """Inversion refinement on a real clip with the shipped model (no mocks)."""
 
 import subprocess
-import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -14,13 +13,14 @@ from physmotion.errors import PhysmotionError
 from physmotion.features.humanml3d import extract_features
 from physmotion.io.importer import import_clip
 from physmotion.motion import Motion
+from tests.cli_runner import invoke
 
 WALK = "bandai/Bandai-Namco-Research-Motiondataset-2/data/dataset-2_walk_normal_001.bvh"
 
 
 def run(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "physmotion.cli", *map(str, args)],
-                          capture_output=True, text=True, timeout=600, check=False)  # fmt: skip
+    """``physmotion ARGS...`` in this process (see tests/cli_runner.py)."""
+    return invoke(*args)
 
 
 @pytest.fixture(scope="module")

@@ -116,6 +116,7 @@ def test_biomo_sample_does_not_depend_on_its_batch(tiny_biomo) -> None:
     assert torch.allclose(alone[0], batch[0], atol=1e-4)
 
 
+@pytest.mark.slow  # BioMoDiffuse sampling with the physical network: 10-50 s each on 2 cores
 def test_default_sampler_follows_the_architecture(tiny_model, tiny_biomo) -> None:
     assert default_sampler(tiny_model) == SamplerConfig()
     bio = default_sampler(tiny_biomo)
@@ -129,6 +130,7 @@ def test_default_sampler_follows_the_architecture(tiny_model, tiny_biomo) -> Non
     assert torch.equal(a, b) and not torch.allclose(a, c)
 
 
+@pytest.mark.slow  # BioMoDiffuse sampling with the physical network: 10-50 s each on 2 cores
 def test_physics_weight_zero_is_the_model_without_its_physical_network(tiny_biomo, monkeypatch) -> None:
     """w = 0: other physical-network weights give the same motion, and the network is never run."""
     cfg = SamplerConfig(**_SDE, phys_scale=0.0)
@@ -152,6 +154,7 @@ def test_physics_weight_zero_is_the_model_without_its_physical_network(tiny_biom
         sample(other, ["a person walks forward"], [40], with_phys, seed=1)
 
 
+@pytest.mark.slow  # BioMoDiffuse sampling with the physical network: 10-50 s each on 2 cores
 def test_physics_weight_and_speed_change_the_motion(tiny_biomo) -> None:
     def run(**kw) -> torch.Tensor:
         return sample(tiny_biomo, ["a person runs"], [40], SamplerConfig(**_SDE, **kw), seed=4)
@@ -166,6 +169,7 @@ def test_physics_weight_and_speed_change_the_motion(tiny_biomo) -> None:
     assert torch.equal(run(phys_scale=1.0, speed=1.0), by_scale[1.0])
 
 
+@pytest.mark.slow  # BioMoDiffuse sampling with the physical network: 10-50 s each on 2 cores
 def test_guided_x0_composes_text_and_physics_guidance(tiny_biomo) -> None:
     """x0 = u_n + s (c_n - u_n) + w (c_p - c_n), from the denoiser's passes run one by one."""
     net = tiny_biomo.net

@@ -102,6 +102,7 @@ def test_fine_tuning_keeps_the_starting_models_licence_tags(built_dir: Path, tin
     assert MotionDiffusion.load(out).info["licence_tags"] == sorted({"NC-other-source", *build_tags})
 
 
+@pytest.mark.slow  # a real training loop until the loss drops
 def test_overfits_a_single_clip(one_clip_dir: Path, tmp_path: Path) -> None:
     """The denoiser learns one real walk well enough that sampling gives it back."""
     cfg = tiny_config(one_clip_dir, tmp_path / "run", d_model=128, steps=400, random_crop=False,

@@ -13,8 +13,6 @@ import json
 import random
 import re
 import signal
-import subprocess
-import sys
 import time
 import zipfile
 from collections import Counter
@@ -28,6 +26,7 @@ import pytest
 from physmotion.errors import PhysmotionError
 from physmotion.io import import_clip, save_motion
 from physmotion.motion import Motion
+from tests.cli_runner import invoke
 
 SEED = 24
 LIMIT_S = 5.0  # CPU seconds a case may take
@@ -468,6 +467,7 @@ def run_case(case: Case, folder: Path, mocap_dir: Path, to_file: bool) -> tuple[
 # The tests
 
 
+@pytest.mark.slow  # 2,000+ mutated inputs through every reader (30-60 s on 2 cores)
 def test_fuzz_every_reader(mocap_dir: Path, tmp_path: Path) -> None:
     rng = random.Random(SEED)
     cases = generate_cases(mocap_dir, rng, per_seed=320)
@@ -505,12 +505,11 @@ def by_kind_total(by_kind: Counter[tuple[str, str, str]], reader: str, outcome: 
     return sum(c for (r, _, o), c in by_kind.items() if r == reader and o == outcome)
 
 
-CLI = Path(sys.executable).parent / "physmotion"
 
 
 @pytest.mark.parametrize("kind", ["flip", "joints_100k_chain", "duplicate_names", "frames_1e9", "mapping"])
 def test_cli_one_line_errors(kind: str, mocap_dir: Path, tmp_path: Path) -> None:
-    """The installed console script: one 'error:' line on stderr, exit 1, no traceback, no output."""
+    """The console script's main: one 'error:' line on stderr, exit 1, no traceback, no output."""
     text = _shrink_bvh((mocap_dir / BANDAI).read_text(), 8)
     bvh = tmp_path / "in.bvh"
     args = ["--rig", "bandai"]
@@ -523,8 +522,7 @@ def test_cli_one_line_errors(kind: str, mocap_dir: Path, tmp_path: Path) -> None
     else:
         bvh.write_text(dict(_bvh_structures(text))[kind])
     out = tmp_path / "out" / "motion.npz"
-    command = [str(CLI), "import", str(bvh), "-o", str(out), *args]
-    res = subprocess.run(command, check=False, capture_output=True, text=True, timeout=60)
+    res = invoke("import", bvh, "-o", out, *args)  # main() in this process (tests/cli_runner.py)
     lines = res.stderr.splitlines()
     assert res.returncode == 1 and len(lines) == 1 and lines[0].startswith("error: "), res.stderr
     assert "Traceback" not in res.stderr

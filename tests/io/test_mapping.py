@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -15,17 +14,16 @@ from physmotion.io import RIGS, import_clip
 from physmotion.io.mapping import MappingError, load_mapping
 from physmotion.motion import Motion
 from physmotion.skeleton import JOINT_NAMES
+from tests.cli_runner import invoke
 
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLE = REPO / "docs" / "examples" / "mapping_bandai.json"
 WALK = "bandai/Bandai-Namco-Research-Motiondataset-2/data/dataset-2_walk_normal_001.bvh"
-CLI = Path(sys.executable).parent / "physmotion"
 
 
 def _cli(*args: object) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [str(CLI), *map(str, args)], check=False, capture_output=True, text=True, timeout=120
-    )
+    """``physmotion ARGS...`` in this process (see tests/cli_runner.py)."""
+    return invoke(*args)
 
 
 def _write(tmp_path: Path, data: object, name: str = "map.json") -> Path:
