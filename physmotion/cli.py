@@ -406,7 +406,9 @@ def generate_cmd(
                              "the run is appended to generate.json there."),
     seconds: float | None = typer.Option(
         None, help=f"Length of each motion in seconds, {MIN_FRAMES / FPS:g} to {MAX_FRAMES / FPS:g} (the "
-        "model's range: another model may allow less) (default: 6)."),
+        "model's range: another model may allow less); left out, each prompt's length is predicted from its "
+        "text by the length model (physmotion/models/length), printed and recorded in generate.json "
+        "(default: predicted from the text)."),
     physics: str | None = typer.Option(
         None, help="none, none+floor (plain sampling, shifted onto the floor as well as a constant "
         "shift can), post[:K] (K projections after sampling), physdiff[:SCHEDULE] (projection "
@@ -443,6 +445,7 @@ def generate_cmd(
         GenerateConfig,
         check_outputs,
         check_request,
+        chosen_lengths,
         generate,
         long_prompts,
         physics_summary,  # fmt: skip
@@ -450,7 +453,8 @@ def generate_cmd(
         write_outputs,
     )
 
-    cfg = _with(GenerateConfig(), seconds=seconds, num=num, physics=physics, seed=seed)
+    cfg = _with(GenerateConfig(), num=num, physics=physics, seed=seed)
+    cfg.seconds = seconds  # None: each prompt's length predicted from its text
     cfg = cfg.at_fine_step() if fine_step else cfg
     cfg = cfg.with_controller(controller, _opt_str(policy))
     check_outputs(texts, out, cfg, overwrite)
@@ -468,6 +472,10 @@ def generate_cmd(
         where = f" (in {_quote(text)})" if len(texts) > 1 else ""
         _warn(f"the model never saw {', '.join(repr(w) for w in words)} in training{where}; "
               "expect a generic motion")  # fmt: skip
+    if seconds is None:
+        for text, (frames, _) in dict(zip(texts, chosen_lengths(texts, cfg, net))).items():
+            console.print(f"length: {frames / FPS:.2f} s for {_quote(text)} (predicted from the text; "
+                          "--seconds sets it)", highlight=False)  # fmt: skip
     with _step_bar("generating") as tick:
         result = generate(texts, cfg, net, on_step=tick)
     paths = write_outputs(result, out, cfg, preview=preview, overwrite=overwrite, model=model,
@@ -639,6 +647,24 @@ def train_evaluator_cmd(
     score = f"; test R@1 {test['R@1']['mean']:.3f}, R@3 {test['R@3']['mean']:.3f}" if test else ""
     console.print(f"trained in {result.seconds / 60:.1f} min, kept epoch {result.best_epoch}{score}; "
                   f"evaluator in {out}", highlight=False)  # fmt: skip
+
+
+@train_app.command("length")
+def train_length_cmd(
+    data: Path = typer.Option(..., help="Built dataset folder (`data build`): its captions and clip lengths."),
+    out: Path = typer.Option(..., "-o", "--out", help="Output folder: model.safetensors, card.json, README.md "
+                             "(the shipped one is physmotion/models/length)."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace a length model already in --out."),
+) -> None:
+    """Train the length model `generate` asks when --seconds is not given (seconds from the caption)."""
+    from physmotion.paths import check_output
+    from physmotion.text.length import train_length
+
+    check_output(out, "folder", overwrite=overwrite)
+    r = train_length(data, out)
+    console.print(f"test MAE {r.test_mae:.2f} s (constant 6 s: {r.test_mae_const6:.2f} s, the train mean "
+                  f"{r.train_mean:.2f} s: {r.test_mae_mean:.2f} s); ridge {r.alpha:g}; model in {out}",
+                  highlight=False)  # fmt: skip
 
 
 @app.command("evaluate")

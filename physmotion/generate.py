@@ -46,7 +46,7 @@ GENERATE_LOG = "generate.json"
 class GenerateConfig:
     """Options of one generation run; ``physics`` also takes a spelling such as ``"post:4"``."""
 
-    seconds: float = 6.0
+    seconds: float | None = 6.0  # None: each prompt's length predicted from its text (physmotion/text/length.py)
     num: int = 1  # samples per text
     physics: PhysicsMode = field(default_factory=PhysicsMode)
     sampler: SamplerConfig = field(default_factory=SamplerConfig)
@@ -77,6 +77,9 @@ class GenerateResult:
     resets: list[int] = field(default_factory=list)  # per motion: resets in the projection it came from
     # morph, per motion: the imitation failed and the sampled motion was kept (empty in the other modes)
     imitation_failed: list[bool] = field(default_factory=list)
+    # per motion: its length in frames and where it came from, "given" or "predicted" (from the text)
+    lengths: list[int] = field(default_factory=list)
+    length_source: list[str] = field(default_factory=list)
 
     @property
     def bodies(self) -> list[np.ndarray | None]:
@@ -86,8 +89,8 @@ class GenerateResult:
         return [m.humanoid for m in self.motions]
 
 
-def check_request(texts: Sequence[str], config: GenerateConfig, model: MotionDiffusion) -> int:
-    """Validate the request before any work; returns the number of frames."""
+def check_request(texts: Sequence[str], config: GenerateConfig, model: MotionDiffusion) -> int | None:
+    """Validate the request before any work; returns the number of frames (None: predicted per text)."""
     if not texts:
         raise PhysmotionError("no text given")
     for t in texts:
@@ -96,13 +99,25 @@ def check_request(texts: Sequence[str], config: GenerateConfig, model: MotionDif
     # A prompt longer than the text encoder's token limit is not refused: the encoder reads its first
     # max_tokens tokens (see long_prompts, which the CLI warns with).
     lo, hi = MIN_FRAMES / FPS, model.denoiser.max_frames / FPS
-    if not np.isfinite(config.seconds) or not lo <= config.seconds <= hi:
+    if config.seconds is not None and (not np.isfinite(config.seconds) or not lo <= config.seconds <= hi):
         raise PhysmotionError(f"--seconds must be between {lo:g} and {hi:g} (the model's range), got {config.seconds:g}")
     if not 1 <= config.num <= 256:
         raise PhysmotionError(f"--num must be between 1 and 256, got {config.num}")
     config.sampler.check()
     config.physics.hook_steps(config.sampler.steps)
-    return round(config.seconds * FPS)
+    return None if config.seconds is None else round(config.seconds * FPS)
+
+
+def chosen_lengths(texts: Sequence[str], config: GenerateConfig, model: MotionDiffusion) -> list[tuple[int, str]]:
+    """Per text, (frames, "given") from ``config.seconds``, or where that is None (frames, "predicted") from
+    the length model (physmotion/models/length, as MoMask predicts a length from the text), within the
+    model's range."""
+    if config.seconds is not None:
+        return [(round(config.seconds * FPS), "given")] * len(texts)
+    from physmotion.text.length import predict_seconds
+
+    seconds = predict_seconds([t.strip() for t in texts])
+    return [(int(np.clip(round(s * FPS), MIN_FRAMES, model.denoiser.max_frames)), "predicted") for s in seconds]
 
 
 def generate(
@@ -114,17 +129,20 @@ def generate(
 ) -> GenerateResult:
     """Generate ``config.num`` motions per text. Deterministic under ``config.seed``.
 
-    lengths: frames per text (evaluation matches the test motions' lengths); default ``config.seconds``.
+    lengths: frames per text (evaluation matches the test motions' lengths); default ``config.seconds``,
+    or where that is None each text's length predicted from it (:func:`chosen_lengths`).
     """
     cfg = config or GenerateConfig()
     model = model or MotionDiffusion.load()
-    frames = check_request(texts, cfg, model)
+    check_request(texts, cfg, model)
+    sources = ["given"] * len(texts)
     if lengths is None:
-        lengths = [frames] * len(texts)
+        lengths, sources = (list(z) for z in zip(*chosen_lengths(texts, cfg, model)))
     elif len(lengths) != len(texts) or not all(MIN_FRAMES // 2 <= n <= model.denoiser.max_frames for n in lengths):
         raise PhysmotionError(f"give one length per text, each {MIN_FRAMES // 2}..{model.denoiser.max_frames} frames")
     prompts = [t.strip() for t in texts for _ in range(cfg.num)]
     lengths = [int(n) for n in lengths for _ in range(cfg.num)]
+    sources = [s for s in sources for _ in range(cfg.num)]
     mode = cfg.physics
     projector = FeatureProjector(model, cfg.morph_projection if mode.kind == MORPH else cfg.projection)
     hook_steps = mode.hook_steps(cfg.sampler.steps)
@@ -178,7 +196,7 @@ def generate(
         for j, p, b, r, res in zip(joints, prompts, bodies, resets, residuals)
     ]
     return GenerateResult(motions=motions, features=list(feats), projections=projector.log,
-                          resets=list(resets), imitation_failed=failed)
+                          resets=list(resets), imitation_failed=failed, lengths=lengths, length_source=sources)
 
 
 def slug(text: str, limit: int = 40) -> str:
@@ -344,6 +362,9 @@ def write_outputs(
         written += files
         motions.append({"prompt": motion.texts[0], "sample": int(stem.rsplit("_", 1)[1]),
                         "files": [p.name for p in files], "resets": motion.resets})  # fmt: skip
+        if result.lengths:  # the length asked for, and whether the user gave it or the text's was predicted
+            motions[-1]["seconds"] = round(result.lengths[i] / FPS, 2)
+            motions[-1]["length_source"] = result.length_source[i]
         if result.imitation_failed:
             motions[-1]["imitation_failed"] = result.imitation_failed[i]
     log = result.projections

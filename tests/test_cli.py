@@ -180,7 +180,8 @@ def test_help_defaults_are_the_dataclasses() -> None:
     from physmotion.diffusion.samplers import BIOMO_SAMPLER
 
     gen = GenerateConfig()
-    expected = {"seconds": gen.seconds, "physics": gen.physics, "num": gen.num, "seed": gen.seed,
+    # --seconds left out: each prompt's length is predicted from its text (GenerateConfig(seconds=None))
+    expected = {"seconds": "predicted from the text", "physics": gen.physics, "num": gen.num, "seed": gen.seed,
                 "sampler": gen.sampler.sampler, "steps": gen.sampler.steps, "eta": gen.sampler.eta,
                 "cfg-scale": gen.sampler.cfg_scale, "phys-scale": BIOMO_SAMPLER.phys_scale,
                 "speed": gen.sampler.speed}  # fmt: skip
