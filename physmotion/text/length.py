@@ -137,7 +137,7 @@ class LengthPredictor:
                                   "`physmotion train length`")  # fmt: skip
         with safe_open(str(path), framework="numpy") as f:
             meta = f.metadata() or {}
-            t = {k: f.get_tensor(k).astype(np.float64) for k in f.keys()}
+            t = {k: f.get_tensor(k).astype(np.float64) for k in f.keys()}  # noqa: SIM118 - not a dict
         return cls(t["weights"], t["centre"], float(t["bias"][0]), meta.get("encoder", "minilm"),
                    float(meta.get("lo", LO_SECONDS)), float(meta.get("hi", HI_SECONDS)))  # fmt: skip
 
@@ -260,14 +260,15 @@ def _write_card(out: Path, data: Path, examples: list[LengthExample], report: Le
         f"    physmotion data build {build} -o BUILD",
         "    physmotion train length --data BUILD -o physmotion/models/length --overwrite",
         "",
-        f"- **Data**: the captions of {card['data']['clips']} clips of that build: {report.examples['train']} train, "
-        f"{report.examples['val']} val and {report.examples['test']} test examples, one per distinct caption of a "
-        "clip (mirrored copies left out). A clip's length is its whole captured length (the build's windows of "
-        "at most 9.8 s joined, frames held at the ends of a short clip left out), capped to 2-9.8 s.",
-        f"- **Licence**: it saw data tagged {', '.join(f'`{t}`' for t in tags) or 'with no restriction'}, so it "
-        f"carries {' and '.join(terms) or 'no restriction'}.",
-        f"- **Training**: ridge strength {report.alpha:g}, the lowest MAE on val when fit on train (tried "
-        f"{', '.join(report.val_mae)}), then fit on train + val; test is measured only.",
+        (f"- **Data**: the captions of {card['data']['clips']} clips of that build: {report.examples['train']} "
+         f"train, {report.examples['val']} val and {report.examples['test']} test examples, one per distinct "
+         "caption of a clip (mirrored copies left out). A clip's length is its whole captured length (the "
+         "build's windows of at most 9.8 s joined, frames held at the ends of a short clip left out), capped "
+         "to 2-9.8 s."),
+        (f"- **Licence**: it saw data tagged {', '.join(f'`{t}`' for t in tags) or 'with no restriction'}, so "
+         f"it carries {' and '.join(terms) or 'no restriction'}."),
+        (f"- **Training**: ridge strength {report.alpha:g}, the lowest MAE on val when fit on train (tried "
+         f"{', '.join(report.val_mae)}), then fit on train + val; test is measured only."),
         "",
         "| test split (caption examples) | MAE, s |",
         "|---|---|",

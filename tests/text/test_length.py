@@ -124,8 +124,8 @@ def _cli(*args: object) -> subprocess.CompletedProcess:
     try:
         from tests.cli_runner import invoke
     except ImportError:  # the CLI in a fresh process
-        return subprocess.run([sys.executable, "-m", "physmotion.cli", *map(str, args)], capture_output=True,
-                              text=True, timeout=600)  # fmt: skip
+        return subprocess.run([sys.executable, "-m", "physmotion.cli", *map(str, args)], check=False,
+                              capture_output=True, text=True, timeout=600)  # fmt: skip
     return invoke(*args)
 
 
