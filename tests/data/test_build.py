@@ -264,7 +264,8 @@ def test_329_joint_accelerations_are_second_differences_of_the_joints(built329_d
         acc = np.load(built329_dir / "new_joint_vecs" / f"{i}.npy")[:, FEATURE_DIM:].reshape(-1, 22, 3)
         joints = np.load(built329_dir / "new_joints" / f"{i}.npy").astype(np.float64)
         second = joints[2:] - 2 * joints[1:-1] + joints[:-2]
-        np.testing.assert_allclose(np.linalg.norm(acc[1:-1], axis=-1), np.linalg.norm(second, axis=-1), atol=1e-6)
+        # atol: the stored joints are float32, a few ulp of coordinates up to ~10 m from the origin
+        np.testing.assert_allclose(np.linalg.norm(acc[1:-1], axis=-1), np.linalg.norm(second, axis=-1), atol=4e-6)
         np.testing.assert_allclose(np.linalg.norm(acc[0], axis=-1), np.linalg.norm(acc[1], axis=-1), atol=1e-6)
 
 

@@ -75,6 +75,7 @@ def test_clip_ids_must_differ_across_sources(mocap_dir: Path, tmp_path: Path) ->
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow  # starts a process
 def test_cli_builds_two_sources(mocap_dir: Path, hdm05_dir: Path, tmp_path: Path) -> None:
     """The summary names each source with its clips, minutes and licences; Latin-1 files get one line."""
     a = _subset(mocap_dir, tmp_path / "mocap", 60)

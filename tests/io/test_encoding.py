@@ -23,6 +23,7 @@ def _latin1(record: list[warnings.WarningMessage]) -> list[str]:
     return [str(w.message) for w in record if issubclass(w.category, Latin1Warning)]
 
 
+@pytest.mark.slow
 def test_every_hdm05_clip_imports_with_one_warning(hdm05_manifest: list[ClipInfo], hdm05_results) -> None:
     """HDM05's AMC headers hold a Latin-1 byte (``X:\\für Bonn``): every clip of its manifest imports."""
     failed = {k: v for k, v in hdm05_results.items() if isinstance(v, str)}
@@ -83,6 +84,7 @@ def test_latin1_bvh_with_latin1_joint_names(clip, tmp_path: Path) -> None:
     assert motion.joints.shape[1:] == (len(JOINT_NAMES), 3)
 
 
+@pytest.mark.slow  # starts processes
 @pytest.mark.parametrize("command", ["import", "metrics"])
 def test_cli_prints_one_warning_line(clip, tmp_path: Path, command: str) -> None:
     path, mapping = _latin1_bvh(clip, tmp_path)
