@@ -111,6 +111,8 @@ def generated(args: argparse.Namespace) -> tuple[list[dict], dict]:
                         "seconds": outs[ctrl].seconds / len(prompts),
                     })  # fmt: skip
             print(f"{cat} seed {seed} done", file=sys.stderr, flush=True)
+            if args.partial:  # a long run leaves what it has measured so far
+                Path(args.partial).write_text(json.dumps(rows))
     return rows, _meta(args, "sampling (generate's PhysDiff P)")
 
 
@@ -183,6 +185,7 @@ def main() -> None:
                         help="captured: comma-separated mocap folders (each with its manifest.csv)")
     parser.add_argument("--limit", type=int, default=0, help="captured: only N clips, evenly spread")
     parser.add_argument("--out", default=None)
+    parser.add_argument("--partial", default=None, help="generated: rewrite the rows so far to this JSON file")
     args = parser.parse_args()
     rows, meta = generated(args) if args.part == "generated" else captured(args)
     out = Path(args.out or f"results/imitator_{args.part}")
