@@ -3,7 +3,8 @@ session, and tiny training runs on it.
 
 Two tiers (see tests/README.md): the default ``pytest`` deselects tests marked ``slow``; ``make test``
 runs both, in two pytest-xdist workers. A test whose fixtures build or import the whole mocap collection
-(``built``, ``built_dir``, ``built329_dir``, ``import_results``, ``imported_clips``) is marked slow here
+(``built``, ``built_dir``, ``built329_dir``, ``import_results``, ``imported_clips``, and HDM05's
+``hdm05_results``) is marked slow here
 (:func:`pytest_collection_modifyitems`); the fast tier builds :data:`SMALL_CLIPS`, a few real clips
 of every source and split, instead (``small_built_dir``, ``small_built329_dir``), and trains its tiny
 models on them.
@@ -35,7 +36,8 @@ MOCAP_DIR = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "mo
 
 
 # Fixtures that import or build the whole mocap collection (minutes on 2 cores): their tests are slow.
-WHOLE_COLLECTION = frozenset({"import_results", "imported_clips", "built", "built_dir", "built329_dir"})
+WHOLE_COLLECTION = frozenset({"import_results", "imported_clips", "built", "built_dir", "built329_dir",
+                              "hdm05_results"})  # fmt: skip
 
 
 def pytest_configure(config: pytest.Config) -> None:

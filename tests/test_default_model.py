@@ -50,6 +50,7 @@ def test_default_model_card_and_licence(model: MotionDiffusion) -> None:
     assert sum(p.stat().st_size for p in DEFAULT_MODEL_DIR.iterdir()) < 60e6
 
 
+@pytest.mark.slow  # the shipped model, 5 prompts x 3 seeds x 6 s (about 90 s); tests/test_pins.py pins it fast
 def test_run_is_faster_and_bouncier_than_walk(stats) -> None:
     assert stats["run"]["speed"] > 1.5 * stats["walk"]["speed"]
     assert stats["walk"]["speed"] > 0.5  # walking goes somewhere
@@ -58,20 +59,24 @@ def test_run_is_faster_and_bouncier_than_walk(stats) -> None:
     assert stats["run"]["foot_speed"] > 2 * stats["walk"]["foot_speed"]
 
 
+@pytest.mark.slow  # the shipped model, 5 prompts x 3 seeds x 6 s (about 90 s); tests/test_pins.py pins it fast
 def test_jump_moves_the_root_up_and_down(stats) -> None:
     assert stats["jump"]["vertical"] > 2 * stats["walk"]["vertical"]
     assert stats["jump"]["foot_high"] > stats["walk"]["foot_high"]  # the feet leave the floor
 
 
+@pytest.mark.slow  # the shipped model, 5 prompts x 3 seeds x 6 s (about 90 s); tests/test_pins.py pins it fast
 def test_kick_lifts_a_foot_fast(stats) -> None:
     assert stats["kick"]["foot_high"] > stats["walk"]["foot_high"] + 0.1
     assert stats["kick"]["foot_speed"] > 1.5 * stats["walk"]["foot_speed"]
 
 
+@pytest.mark.slow  # the shipped model, 5 prompts x 3 seeds x 6 s (about 90 s); tests/test_pins.py pins it fast
 def test_wave_raises_a_hand(stats) -> None:
     assert stats["wave"]["wrist_over_pelvis"] > stats["walk"]["wrist_over_pelvis"] + 0.15
 
 
+@pytest.mark.slow  # the shipped model, 5 prompts x 3 seeds x 6 s (about 90 s); tests/test_pins.py pins it fast
 def test_standing_actions_stay_in_place(stats) -> None:
     for p in ("wave", "kick"):
         assert stats[p]["speed"] < 0.5 * stats["walk"]["speed"], p

@@ -217,6 +217,7 @@ def test_morph_mode_is_one_projection_with_imitation_selection(tiny_model) -> No
     assert imitation_columns([none]) == {}
 
 
+@pytest.mark.slow  # two console-script processes with the shipped model (about 40 s)
 def test_console_script_generate_morph_writes_the_same_files(tmp_path: Path) -> None:
     """The installed console script, the shipped model: morph writes what the other modes write, and its
     imitation failures go to generate.json."""
