@@ -296,9 +296,9 @@ def metrics(
     (a/x.npz and b/x.npz stay apart). Where the table is wider than the terminal the columns are
     numbered and a legend names the files."""
     from physmotion.metrics import physical_metrics
-    from physmotion.metrics.report import (check_npz, fit_table, path_labels, residual_summary, table_width,
-                                           to_csv, to_json)
-    from physmotion.motion import Motion, write_atomic
+    from physmotion.metrics.report import (fit_table, path_labels, residual_summary, table_width, to_csv,
+                                           to_json)
+    from physmotion.motion import write_atomic
 
     if surface not in ("humanoid", "joints"):
         raise PhysmotionError(f"--surface must be 'humanoid' or 'joints', got {surface!r}")
@@ -312,10 +312,10 @@ def metrics(
         _check_out(out, overwrite)
     from physmotion.render import load_motion
 
-    for path in paths:
-        if path.suffix.lower() != ".bvh":
-            check_npz(path)
-        elif not path.is_file():
+    for path in paths:  # every file checked before any work
+        if path.suffix.lower() not in (".npz", ".bvh"):
+            raise PhysmotionError(f"{path}: metrics reads .npz or .bvh; run `physmotion import` on other formats")
+        if not path.is_file():
             raise PhysmotionError(f"{path}: no such file")
     results = {}
     for path, label in zip(paths, path_labels(paths)):

@@ -134,10 +134,15 @@ def test_cli_metrics_same_named_files_stay_apart(three_x: Path) -> None:
     assert len(target.read_text().splitlines()) == 2
 
 
-def test_cli_metrics_refuses_a_bvh_in_one_line(mocap_dir: Path, walk_npz: Path) -> None:
+def test_cli_metrics_takes_a_bvh_and_refuses_other_files_in_one_line(mocap_dir: Path, walk_npz: Path) -> None:
+    """A .bvh is imported on the fly, as render does (tests/test_cli_import.py compares the figures); any
+    other file is refused before the work, in one line that says what to do."""
     bvh = mocap_dir / BANDAI_WALK
-    line = one_line_error(cli("metrics", walk_npz, bvh))
-    assert line == f"error: {bvh}: metrics expects .npz; run `physmotion import` first"
+    res = cli("metrics", walk_npz, bvh)
+    assert res.returncode == 0 and "penetrate" in res.stdout, res.stderr
+    amc = mocap_dir / "cmu_amc" / "subjects" / "02" / "02_01.amc"
+    line = one_line_error(cli("metrics", walk_npz, amc))
+    assert line == f"error: {amc}: metrics reads .npz or .bvh; run `physmotion import` on other formats"
     assert "allow_pickle" not in line
 
 

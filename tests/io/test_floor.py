@@ -31,7 +31,7 @@ def test_highest_floor_is_exact() -> None:
         low = rng.normal(0.0, 0.03, n)
         f = _highest_floor(low, 0.0015)
 
-        def depth(floor: float) -> float:
+        def depth(floor: float, low: np.ndarray = low) -> float:
             return float(np.maximum(floor - 0.005 - low, 0.0).mean())
 
         assert depth(f) == pytest.approx(0.0015, abs=1e-12) and depth(f + 1e-6) > 0.0015
