@@ -6,9 +6,10 @@
     motion = import_clip("my.bvh", mapping="map.json")                  # ... described in a file
     save_bvh(motion, "out.bvh"); save_npz(motion, "out.npz")
 
-Modules: ``bvh`` (BVH reader/writer), ``amc`` (ASF/AMC reader), ``rigs`` (generic rig tree and
-per-rig tables), ``mapping`` (a user's rig as a JSON file), ``canonical`` (to the project's
-conventions), ``importer``, ``export``.
+Modules: ``bvh`` (BVH reader/writer; a file that is not UTF-8 is read as Latin-1 with a warning),
+``amc`` (ASF/AMC reader), ``rigs`` (generic rig tree and per-rig tables, Mixamo's among them),
+``mapping`` (a user's rig as a JSON file), ``canonical`` (to the project's conventions), ``floor``
+(where the motion meets the floor), ``importer``, ``export``.
 """
 
 from physmotion.io.export import save_bvh, save_motion, save_npz

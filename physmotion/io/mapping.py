@@ -11,7 +11,8 @@ Schema (``physmotion import FILE --mapping map.json``; ``docs/examples/mapping_b
     }
 
 ``joints`` is required and names all 22 joints of :data:`physmotion.skeleton.JOINT_NAMES`; a value is
-one of the file's joint names, or a blend: a list of ``[joint name, weight]`` pairs, weights >= 0
+one of the file's joint names (a BVH ``End Site`` is ``<parent>_end``, an ASF bone's end ``<bone>_end``:
+``docs/examples/mapping_mixamo_no_toes.json`` maps the toes of a rig without toe bones so), or a blend: a list of ``[joint name, weight]`` pairs, weights >= 0
 summing to 1 (see :data:`~physmotion.io.rigs.JointSource`). ``units`` (a name as
 :func:`~physmotion.io.rigs.parse_units` reads it, or metres per file unit), ``up_axis`` (X, Y or Z)
 and ``fps`` (the file's true rate) are optional; a value given on the command line wins. Keys
