@@ -18,7 +18,7 @@ captions are short; HumanML3D's are under 30 words."""
 
 FLOOR_JOINTS: str = "joints"
 """Floor convention of HumanML3D's features: each clip's lowest *joint* on y = 0 (``process_file``). It
-leaves the humanoid's soles about 2.5 cm under the floor (docs/decisions.md: "floor convention")."""
+leaves the humanoid's soles about 2.5 cm under the floor (docs/decisions/data.md: "floor convention")."""
 
 FLOOR_SURFACE: str = "surface"
 """Floor convention of physical motion: the humanoid's soles on y = 0, as P's simulated motions stand.

@@ -7,7 +7,7 @@ floor. `--physics none` is measured in that convention, the real rows of our tab
 (``ground_on_surface``). This prints both for the captured test and train splits and, per synthetic
 folder of `physmotion morph synth`, for the motions Morph's imitation selection keeps (refined ones, and
 the generated inputs they came from): what fine-tuning on them can teach plain sampling
-(docs/decisions.md, "what fine-tuning can do for --physics none"). Millimetres, humanoid surface.
+(docs/decisions/morph.md, "what fine-tuning can do for --physics none"). Millimetres, humanoid surface.
 """
 
 from __future__ import annotations

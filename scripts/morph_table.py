@@ -31,7 +31,8 @@ from physmotion.morph.loop import read_rounds
 from physmotion.physics_mode import parse_modes
 
 # post:1 is one P with the sampling preset's reset instead of Morph's selection: the cheapest projection
-# after sampling, and what one P can do for a tuned model (docs/decisions.md "one P on the Morph model").
+# after sampling, and what one P can do for a tuned model (docs/decisions/morph.md "one P on the Morph
+# model").
 MODES = "none,none+floor,post:1,morph,physdiff:end:4,space:1"
 CONTROL_MODES = "none,none+floor"
 

@@ -34,7 +34,8 @@ from physmotion.physics.tracking import TrackingConfig
 
 def configs() -> dict[str, ProjectionConfig]:
     base = ProjectionConfig()
-    # The residual before docs/decisions.md "residual within 0.1 W on walks and runs": a baseline row.
+    # The residual before docs/decisions/projection.md "residual within 0.1 W on walks and runs": a baseline
+    # row.
     held = replace(base, humanoid=replace(base.humanoid, residual_every=4),
                    tracking=replace(base.tracking, residual_force=0.3, feet_torque_weight=1.0))
     no_feet = replace(held.tracking, feet_balance=False)

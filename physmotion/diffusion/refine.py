@@ -25,7 +25,7 @@ the two are averaged joint by joint with inverse-variance weights estimated from
 smoothed input's noise from what the filter removed, the model's error from how far it lands from the
 smoothed input (a Wiener-style fusion of two estimates, as the data-consistency step of diffusion
 inverse solvers). The paper's plain inversion (``smooth_hz=None``) loses to the low-pass filter alone on
-jittery clips (docs/decisions.md: "refine fused with the smoothed input").
+jittery clips (docs/decisions/biomodiffuse.md: "refine fused with the smoothed input").
 Motions longer than the model's ``max_frames`` (196 frames, 9.8 s at 20 fps) are refused.
 """
 
@@ -59,9 +59,9 @@ class RefineConfig:
     BioMoDiffuse model (None: the model's sampling default, Eq. 11's "forward diffusion with our physics
     guidance"; other models have none); smooth_hz: cut-off (Hz) of the low-pass applied to the input
     before inversion, whose result is then fused with the model's (None: the paper's plain inversion;
-    docs/decisions.md "refine fused with the smoothed input"); anchor_hz: without smoothing, the cut-off
-    below which heading and root path follow the input (None: only one yaw + translation for the whole
-    clip; docs/decisions.md "refine keeps the input's path")."""
+    docs/decisions/biomodiffuse.md "refine fused with the smoothed input"); anchor_hz: without smoothing, the
+    cut-off below which heading and root path follow the input (None: only one yaw + translation for the whole
+    clip; docs/decisions/biomodiffuse.md "refine keeps the input's path")."""
 
     strength: float = 0.3
     steps: int = 50

@@ -20,7 +20,7 @@ from physmotion.diffusion.schedule import SAMPLERS, sampling_scheduler
 from physmotion.errors import PhysmotionError
 from physmotion.text.encoder import TextFeatures, load_text_encoder
 
-BIOMO_PHYS_SCALE = 1.0  # measured on the val split: docs/decisions.md, "physics guidance weight"
+BIOMO_PHYS_SCALE = 1.0  # measured on the val split: docs/decisions/biomodiffuse.md, "physics guidance weight"
 
 # (x0 normalised (B, T, D), lengths (B,)) -> replacement x0 of the same shape
 X0Hook = Callable[[torch.Tensor, list[int]], torch.Tensor]
@@ -65,7 +65,7 @@ class SamplerConfig:
 
 BIOMO_SAMPLER = SamplerConfig(sampler="dpmpp-sde", steps=10, cfg_scale=2.5, phys_scale=BIOMO_PHYS_SCALE)
 """BioMoDiffuse's sampling default (App. B): SDE DPM-Solver++ 2nd order, Karras sigmas, 10 steps, CFG 2.5,
-with physics guidance (its weight: docs/decisions.md, "physics guidance weight")."""
+with physics guidance (its weight: docs/decisions/biomodiffuse.md, "physics guidance weight")."""
 
 
 def default_sampler(model: MotionDiffusion) -> SamplerConfig:

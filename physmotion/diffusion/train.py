@@ -85,13 +85,13 @@ class TrainConfig:
     # + accel_weight * L_accel (the 66 joint-acceleration dims of the output); "biomo" adds
     # phys_weight * L_phys (the physical network's accelerations) + emg_weight * L_emg (its activations
     # against the cached stand-ins), and drops the physical network with probability phys_drop (P_c).
-    # accel_weight 0.1, not the paper's implicit 1: docs/decisions.md "L_accel's weight".
+    # accel_weight 0.1, not the paper's implicit 1: docs/decisions/biomodiffuse.md "L_accel's weight".
     accel_weight: float = 0.1
     phys_weight: float = 1.0
     emg_weight: float = 1.0
     phys_drop: float = 0.1
     # MDM's velocity loss (lambda_vel), here on the features: vel_weight * MSE of the frame-to-frame
-    # differences of the predicted x0 against the true ones; 0 leaves it out (docs/decisions.md,
+    # differences of the predicted x0 against the true ones; 0 leaves it out (docs/decisions/sampling.md,
     # "velocity loss").
     vel_weight: float = 0.0
     bf16: bool | None = None  # bf16 autocast; None: where the hardware has it natively (bf16_helps)

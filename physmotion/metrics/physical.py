@@ -14,7 +14,7 @@ tables ground them first with :func:`physmotion.physics.surface.ground_on_surfac
 shift that leaves the least Phys-Err (a rigid box foot cannot both stand flat and roll over heel and
 toe on the floor as a real foot does): the real row and the ``none+floor`` mode are grounded that way;
 ``none`` is measured as sampled, and P's output is already a simulated body on the simulator's floor
-(docs/decisions.md, "floor convention").
+(docs/decisions/data.md, "floor convention").
 
 Sources followed (code read, not copied):
 - PhysDiff App. A, as implemented in GuyTevet/CLoSD
@@ -459,7 +459,7 @@ def skate(joints: np.ndarray, fps: float = FPS, *, lengths: Lengths = None, mask
     This follows PhysDiff's text (App. A: "foot joints that contact the ground ... their average
     horizontal displacement"), not CLoSD's code, which counts per frame pair only the joint lowest by
     its joint height (floor at the motion's lowest joint), finds contact in few frames and so reads far
-    lower (docs/decisions.md: "PhysDiff Skate as its text says, not as CLoSD's code").
+    lower (docs/decisions/metrics.md: "PhysDiff Skate as its text says, not as CLoSD's code").
     """
     return _one("skate", joints, fps, lengths, mask, body, params)
 

@@ -40,7 +40,7 @@ SKELETON = "smpl22"
 # the original setup); the learning rate is the one setting Morph changes.
 # The base's loss terms (vel_weight) belong to that setup too, and so does its length filter
 # (MotionDiffusion.trained_max_length, set in _prepare): without them a fine-tune of the default trains on
-# windows and a loss it never saw (docs/decisions.md: "Morph from the velocity-loss default").
+# windows and a loss it never saw (docs/decisions/morph.md: "Morph from the velocity-loss default").
 INHERITED = ("batch_size", "crop", "random_crop", "warmup", "weight_decay", "ema_decay", "grad_clip",
              "text_drop", "vel_weight", "log_every")  # fmt: skip
 
@@ -58,7 +58,7 @@ class FinetuneConfig:
     data: str
     out: str
     # Share of synthetic items in each batch; the rest from the real train split. 0.1 keeps FID at the
-    # base's PhysDiff row where 0.25 and 0.5 did not (docs/decisions.md: "a lower mix, 0.1").
+    # base's PhysDiff row where 0.25 and 0.5 did not (docs/decisions/morph.md: "a lower mix, 0.1").
     mix: float = 0.1
     lr: float = 1e-5  # Morph Sec. 4 "Training Setup": 1e-5 (the original runs used 2e-4 here)
     steps: int = 2000
@@ -71,7 +71,7 @@ class FinetuneConfig:
     bf16: bool | None = None
     # Floor convention of the training motions, and so of the fine-tuned model's samples: the soles on
     # the floor where P put them (FLOOR_SURFACE), or HumanML3D's lowest joint on y = 0 (FLOOR_JOINTS, as
-    # the base model's data). docs/decisions.md: "Morph fine-tuning on the physical floor".
+    # the base model's data). docs/decisions/morph.md: "Morph fine-tuning on the physical floor".
     floor: str = FLOOR_SURFACE
 
 

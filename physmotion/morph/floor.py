@@ -4,7 +4,7 @@ HumanML3D's features put each clip's lowest *joint* on y = 0, which leaves the h
 2.5 cm under the floor, and re-flooring P's simulated motions that way throws away where physics put
 their feet. The features store absolute heights, so they can hold the physical floor instead: a model
 fine-tuned on motions in this convention samples motions that stand on the floor
-(docs/decisions.md: "Morph fine-tuning on the physical floor").
+(docs/decisions/morph.md: "Morph fine-tuning on the physical floor").
 
 - refined synthetic motions: the simulation's own heights (``extract_features(..., floor=False)`` of
   ``new_joints``, whose soles P kept on the floor);

@@ -6,8 +6,8 @@ to follow the motion stand in for them: the inverse dynamics of the reference wi
 forces split out (:func:`physmotion.physics.tracking.prepare_reference`), grouped into
 :data:`ACTIVATION_CHANNELS` and divided by the actuators' torque limits. Those torques are clipped at
 the limits, so an activation of 1 means the joint is saturated. No simulation runs, so the result is
-deterministic and does not depend on whether a tracker could follow the motion (docs/decisions.md:
-"muscle activations from inverse dynamics").
+deterministic and does not depend on whether a tracker could follow the motion
+(docs/decisions/biomodiffuse.md: "muscle activations from inverse dynamics").
 """
 
 from __future__ import annotations

@@ -74,10 +74,10 @@ def default_gains() -> dict[str, PDGain]:
 
     Stiffer than PHC/SMPLSim's SMPL humanoid gains (hip/knee/spine kp 250-500, ankle 150-300, toe ~100),
     under which this body falls forward in ~2 s under a PD hold: gravity's toppling stiffness m g h
-    (~620 N m/rad) beats the ankles' (docs/decisions.md: "PD gains stiffer than PHC's"). kv = kp / 10
-    throughout. Torque limits: half a radian of error for the legs and spine (the ankle's 1000 N m is
-    far above a human's ~200 N m: it keeps the PD-only body upright, a balance controller should lower
-    it), one radian for the upper body.
+    (~620 N m/rad) beats the ankles' (docs/decisions/projection.md: "PD gains stiffer than PHC's").
+    kv = kp / 10 throughout. Torque limits: half a radian of error for the legs and spine (the ankle's
+    1000 N m is far above a human's ~200 N m: it keeps the PD-only body upright, a balance controller should
+    lower it), one radian for the upper body.
     """
     return {
         "hip": PDGain(1000.0, 100.0, 500.0),
@@ -134,8 +134,8 @@ def default_hinge_order() -> dict[str, str]:
     """Nesting order of the three hinges per group (= the intrinsic Euler sequence, outermost first).
 
     The middle axis gimbal-locks at +-90 degrees, so it must be an axis of small range: per group, the
-    order whose middle angle stays smallest on retargeted real mocap (docs/decisions.md: "hinge orders
-    by the largest middle angle"). Leaf joints (foot, head, wrist) have no child: IK leaves them at 0,
+    order whose middle angle stays smallest on retargeted real mocap (docs/decisions/projection.md: "hinge
+    orders by the largest middle angle"). Leaf joints (foot, head, wrist) have no child: IK leaves them at 0,
     they follow their parent.
     """
     legs = "yzx"
@@ -186,17 +186,17 @@ class HumanoidConfig:
 
     ``armature_feet``: the foot subtree is light (~1 kg) and the ankle stiff, and MuJoCo's implicitfast
     integrates kp explicitly: with the 0.01 of the other hinges the standing body buzzed on its feet and
-    fell (docs/decisions.md: "armature 0.03 on ankle and toe hinges").
+    fell (docs/decisions/projection.md: "armature 0.03 on ankle and toe hinges").
     """
 
-    # 360 Hz: the stiff ankle and contact need the small step (240 Hz tracks worse; docs/decisions.md:
-    # "projection humanoid").
+    # 360 Hz: the stiff ankle and contact need the small step (240 Hz tracks worse;
+    # docs/decisions/projection.md: "projection humanoid").
     sim_dt: float = 1.0 / 360.0
     control_dt: float = 1.0 / 30.0  # PhysDiff's policy rate (Appendix C: 60 Hz sim, 30 Hz control)
     # The root residual is recomputed (in Python) every this many simulation steps and held between;
     # the steps in between run in one ``mj_step(nstep=...)`` call, in C, without the GIL.
     # 180 Hz: held over 4 steps (90 Hz), the runs' tracking error grew by half once the residual was
-    # bounded at 0.2 W (docs/decisions.md: "residual within 0.1 W on walks and runs").
+    # bounded at 0.2 W (docs/decisions/projection.md: "residual within 0.1 W on walks and runs").
     residual_every: int = 2
     total_mass: float = 70.0  # kg
     gains: dict[str, PDGain] = field(default_factory=default_gains)

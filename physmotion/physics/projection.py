@@ -54,7 +54,7 @@ class ProjectionConfig:
     follow_drift: bool = True
     # With reset_on_fail and follow_drift: where the body is lower than the motion and its pose is within
     # tau once the whole offset is taken out, it fell short of a flight (a jump's push comes up short):
-    # let it land instead of resetting it into the air (docs/decisions.md: "let a short jump land").
+    # let it land instead of resetting it into the air (docs/decisions/sampling.md: "let a short jump land").
     let_land: bool = True
     # What the tracker is asked to follow: the reference out of the floor, swing feet a little higher
     # (physics/shaping.py has the measurements).
@@ -69,8 +69,8 @@ class ProjectionConfig:
     # root's position error (reference - simulated) times ``ilc_gain`` is added to the reference and the
     # motion is simulated again, ``ilc_passes`` times; the pass closest to the input (mean MPJPE, a
     # success before a failure) is kept. Costs passes + 1 simulations. Root only: with the hinges and the
-    # orientation fed forward too, runs tracked worse or fell (docs/decisions.md: "iterative learning
-    # control for offline projection").
+    # orientation fed forward too, runs tracked worse or fell (docs/decisions/projection.md: "iterative
+    # learning control for offline projection").
     ilc_passes: int = 0
     ilc_gain: float = 0.5
     # Who drives the humanoid: the model-based tracker, or the learned imitation policy over it
@@ -98,19 +98,20 @@ class ProjectionConfig:
         """The preset generation uses (physdiff and post): a fall (error past tau = 0.15 m) puts the
         humanoid back on the motion, or moves the motion to it where it only drifted or lets it land where
         it only fell short of a flight, so P always returns a simulated motion; each reset is counted
-        (``ProjectedMotion.resets``). tau 0.15 m beat 0.2-0.5 m on PhysDiff's Phys-Err (docs/decisions.md:
-        "sampling projection: reset at 0.15 m").
+        (``ProjectedMotion.resets``). tau 0.15 m beat 0.2-0.5 m on PhysDiff's Phys-Err
+        (docs/decisions/sampling.md: "sampling projection: reset at 0.15 m").
 
         The root wrench is not carried by the feet here (``TrackingConfig.feet_balance`` off): on the
-        denoiser's intermediate motions it doubled the share of outputs with a reset (docs/decisions.md:
-        "balance through the feet"). The residual keeps its 0.3 W bound, its 90 Hz hold and no ballistic
-        flight phases: every generation figure was measured so, and the plain projection's changes of
-        "residual within 0.1 W on walks and runs" were measured on captured motion only.
+        denoiser's intermediate motions it doubled the share of outputs with a reset
+        (docs/decisions/projection.md: "balance through the feet"). The residual keeps its 0.3 W bound, its
+        90 Hz hold and no ballistic flight phases: every generation figure was measured so, and the plain
+        projection's changes of "residual within 0.1 W on walks and runs" were measured on captured motion
+        only.
 
         A generated frame often hovers a centimetre or two over the floor, so the swing feet are lifted
-        against the frame's lowest point (``ShapingConfig.hover_support``; docs/decisions.md: "support
-        judged against a hovering frame in the sampling preset"); the plain projection keeps the floor
-        rule, which captured runs read better."""
+        against the frame's lowest point (``ShapingConfig.hover_support``; docs/decisions/sampling.md:
+        "support judged against a hovering frame in the sampling preset"); the plain projection keeps the
+        floor rule, which captured runs read better."""
         defaults = {
             "reset_on_fail": True,
             "tau": 0.15,
@@ -126,8 +127,8 @@ class ProjectionConfig:
         twice as many steps, so it still changes at the same rate. On captured runs the contacts resolve
         better: Float 15.0 -> 9.7 mm, MPJPE 50.2 -> 40.6 mm. An option (``physmotion project
         --fine-step``, ``generate --fine-step``), not the default: 2 of the 123 captured walks fail under
-        the plain P at this step, and PhysDiff costs more than the issue allows (docs/decisions.md: "the
-        finer step as an option for the plain P")."""
+        the plain P at this step, and PhysDiff costs more than the issue allows (docs/decisions/projection.md:
+        "the finer step as an option for the plain P")."""
         h = self.humanoid
         return replace(self, humanoid=replace(h, sim_dt=h.sim_dt / 2, residual_every=2 * h.residual_every))
 

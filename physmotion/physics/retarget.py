@@ -168,7 +168,7 @@ def _euler_to_matrix(angles: np.ndarray, seq: str) -> np.ndarray:
 # Arms: a raised arm needs any twist (arm forward: the elbow bends upwards, a quarter turn from the
 # swing's frame), and all of it in the shoulder sends the shoulder's Euler angles through gimbal lock.
 # The twist is unwrapped over time and clipped to 50 degrees, the rest stays in the elbow, which is then
-# mostly its flexion hinge (docs/decisions.md: "upper-arm twist clipped to 50 degrees").
+# mostly its flexion hinge (docs/decisions/projection.md: "upper-arm twist clipped to 50 degrees").
 _LIMBS: tuple[tuple[str, str, tuple[float, float, float], float | None], ...] = (
     ("left_hip", "left_knee", (1.0, 0.0, 0.0), None),
     ("right_hip", "right_knee", (1.0, 0.0, 0.0), None),

@@ -3,26 +3,26 @@
 Corrections of a retargeted reference (qpos at the control rate), each measured on all 203
 walking/running clips of the bundled mocap (bench/projection_quality.py) and on the issue's test
 motions (tests/physics/test_projection.py); the figures, and the alternatives measured against them,
-are in docs/decisions.md:
+are in docs/decisions/projection.md:
 
 - :func:`to_floor` raises a frame whose geometry dips under the floor, since the stiff legs would press
   the feet toward targets under the floor and launch the body; a reference that floats for a second or
-  more is first lowered onto the floor (docs/decisions.md: "reference raised out of the floor").
+  more is first lowered onto the floor (docs/decisions/projection.md: "reference raised out of the floor").
 - :func:`swing_clearance` lifts a moving swing foot 3 cm further from the floor while the other foot is
   on it: mocap toes clear the floor by only about 1.5 cm in mid-swing, and a body a few degrees off its
-  reference scuffs the floor with them (docs/decisions.md: "swing-foot clearance of a fixed 3 cm").
+  reference scuffs the floor with them (docs/decisions/projection.md: "swing-foot clearance of a fixed 3 cm").
 - :func:`flatten_toe_off` dorsiflexes the ankle where a push-off into a flight phase (a run's stride,
   a jump) digs the rigid toe box into the floor: a human's toes bend there, ours cannot, and raising the
   whole frame instead (``to_floor``) bent the reference's centre of mass into a path that needs the floor
-  to pull, which the tracker followed with a launch (docs/decisions.md: "toe-off flattened before
+  to pull, which the tracker followed with a launch (docs/decisions/projection.md: "toe-off flattened before
   flight").
 - :func:`ballistic_flight` moves the root in each flight phase so that the humanoid's centre of mass flies
   the path gravity allows between take-off and landing: retargeted onto our humanoid's masses, a captured
   flight is not free fall, and the feed-forward asked the root residual for the difference
-  (docs/decisions.md: "residual within 0.1 W on walks and runs").
+  (docs/decisions/projection.md: "residual within 0.1 W on walks and runs").
 - Support by speed (``stance_by_speed``): a generated swing foot that dips under the floor makes
   grounding raise the frame, and the slow stance foot then hangs centimetres up; such a swing foot is
-  lifted above the stance foot and the frame lowered onto it (docs/decisions.md: "support found by
+  lifted above the stance foot and the frame lowered onto it (docs/decisions/projection.md: "support found by
   speed").
 
 MPJPE and the metrics are always measured against the unshaped input.
@@ -54,8 +54,8 @@ class ShapingConfig:
     # > 0: in a frame whose lowest point hovers less than this over the floor, ``support`` is measured from
     # that point, so a generated stance foot hovering a few centimetres up still lets the swing foot be
     # lifted (P puts the body down on it anyway). 0.05 in generation's preset
-    # (``ProjectionConfig.sampling``); off here, for captured motion (docs/decisions.md: "support judged
-    # against a hovering frame in the sampling preset").
+    # (``ProjectionConfig.sampling``); off here, for captured motion (docs/decisions/sampling.md: "support
+    # judged against a hovering frame in the sampling preset").
     hover_support: float = 0.0  # m
     # A fast foot on the floor under a slow foot in the air is a swing foot that dipped into the floor
     # (grounding then lifted the frame by it): lift it above the slow foot and lower the frame onto that.
@@ -64,7 +64,7 @@ class ShapingConfig:
     # floor and under its heel, in the ``toe_off_lead`` seconds before a flight phase: a frame where the
     # reference's centre of mass falls faster than (1 - ``flight_load``) g, i.e. the feet would carry less
     # than that share of W. Flattened fully (depth 0) the simulated runner pushed off too little, landed
-    # early and skidded (docs/decisions.md: "toe-off flattened before flight").
+    # early and skidded (docs/decisions/projection.md: "toe-off flattened before flight").
     flatten_toe_off: bool = True
     toe_off_lead: float = 0.2  # s
     flight_load: float = 0.3  # fraction of W
@@ -142,7 +142,7 @@ def to_floor(model, qpos: np.ndarray, dt: float, float_window: float) -> np.ndar
     is taken to float, not to jump: a jump's flight lasts well under a second. It is lowered by the
     least height it keeps over that window (a running minimum, smoothed over 0.1 s), so that it stands
     on the floor: tracked floating, the body hops as the root PD pulls it up toward the reference
-    (docs/decisions.md: "reference raised out of the floor"). 0: never lowered.
+    (docs/decisions/projection.md: "reference raised out of the floor"). 0: never lowered.
     """
     out = qpos.copy()
     out[:, 2] += _floor_shift(_Geometry(model, qpos).lowest, dt, float_window)

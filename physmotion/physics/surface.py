@@ -161,7 +161,7 @@ def surface_lift(joints: np.ndarray, body: np.ndarray, config: HumanoidConfig | 
 
     Why not "the lowest point over the clip on the floor": the box feet dip their corners 15-30 mm below
     the flat stance at heel strikes and toe-offs, so on captured walks that floor leaves the stance foot
-    floating (test split: Float 23 mm, Phys-Err 23 mm; docs/decisions.md: "floor convention"). The
+    floating (test split: Float 23 mm, Phys-Err 23 mm; docs/decisions/data.md: "floor convention"). The
     candidates are the 0th to 50th percentiles of the per-frame lowest surface point.
     joints: (T, 22, 3) metres, Y up; body: the humanoid's rest offsets (22, 3).
     """

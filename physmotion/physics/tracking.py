@@ -9,7 +9,7 @@ The model-based tracker needs no training. At each control step (30 Hz by defaul
   them: min-norm foot forces in a friction pyramid (NNLS) at the foot-box corners that touch the
   floor in the reference. ``mj_inverse`` with contacts on is useless here: the soft contact model
   turns small reference penetrations into huge forces, and a feed-forward built on them pushes the
-  body up (docs/decisions.md: "inverse dynamics without contacts, foot forces split out");
+  body up (docs/decisions/projection.md: "inverse dynamics without contacts, foot forces split out");
 - a root wrench: what the feet could not explain in the reference, plus a PD pull of the pelvis toward
   the reference. With ``feet_balance`` the feet that touch the floor in the simulation carry what they
   can of it (contact forces in the friction pyramid, made by the legs' joint torques); the rest is the
@@ -42,8 +42,8 @@ STANDARD_GRAVITY = 9.81  # m/s^2: residual bounds are fractions of body weight o
 class TrackingConfig:
     """Gains and bounds of the model-based tracker (SI units; fractions of body weight W = m g)."""
 
-    # Root residual bounds (docs/decisions.md: "tracker residual bounds", "residual within 0.1 W on walks
-    # and runs"): 0.2 W with the feet carrying the force first; upward force capped at 0.1 W so the
+    # Root residual bounds (docs/decisions/projection.md: "tracker residual bounds", "residual within 0.1 W on
+    # walks and runs"): 0.2 W with the feet carrying the force first; upward force capped at 0.1 W so the
     # residual cannot hold a body up.
     residual_force: float = 0.2  # max |F| on the root as a fraction of W
     residual_torque: float = 1.0  # max |tau| on the root as a fraction of W x 1 m
@@ -57,7 +57,8 @@ class TrackingConfig:
     feedforward: bool = True
     # Route the root wrench (feed-forward leftover + root PD) through the feet that touch the floor in the
     # simulation first: foot forces in the friction pyramid (NNLS), made by the legs' joint torques; only
-    # what the feet cannot carry is left to the residual (docs/decisions.md: "balance through the feet").
+    # what the feet cannot carry is left to the residual (docs/decisions/projection.md: "balance through the
+    # feet").
     feet_balance: bool = True
     # Weight of the torque rows against the force rows in that fit (at 1, 1 N m counts as much as 1 N):
     # below 1 the feet carry more of the force and leave more torque to the residual, whose bound

@@ -1,7 +1,7 @@
 """Worker processes for batches of motions: each motion's projection runs whole in one process.
 
 The tracker is Python at the simulation rate and holds the GIL, and so do retargeting and reference
-shaping, so threads gain little on a batch; processes use every core (docs/decisions.md: "worker
+shaping, so threads gain little on a batch; processes use every core (docs/decisions/projection.md: "worker
 processes for a batch of motions"). Results are bit-identical whichever process runs a motion: each is
 simulated on its own.
 

@@ -92,7 +92,8 @@ def test_noisy_clip_beats_the_low_pass_filter(model, clean, noisy):
     out = refine(model, noisy, 20, RefineConfig(strength=0.3))
     filtered = low_pass(noisy, 4.0)
     # Issue 22's bar at 2 cm on this walk. Measured: MPJPE noisy 31.9 / low-pass 19.7 / refine 12.2 mm,
-    # acceleration error 31.2 / 4.97 / 2.94 m/s^2 (docs/decisions.md "refine fused with the smoothed input").
+    # acceleration error 31.2 / 4.97 / 2.94 m/s^2 (docs/decisions/biomodiffuse.md "refine fused with the
+    # smoothed input").
     assert _mpjpe_mm(out, clean) < 0.8 * _mpjpe_mm(filtered, clean)
     assert _accel(out, clean) < 0.8 * _accel(filtered, clean)
     # The paper's inversion alone does not: it smooths, but it is no better than the filter.

@@ -230,8 +230,9 @@ def _flight_apex(joints: np.ndarray, surface, simulated: np.ndarray, fps: float)
 def test_captured_jumps_keep_their_flight(mocap_dir) -> None:
     """The three single jumps of the mocap (CMU 02_04 as BVH and as iClone; 01_01's forward jumps): the
     airborne share holds, and the pelvis reaches the apex of the longest flight 6.6 cm short on average
-    (6.9, 7.0, 5.7; the tracker as it was: 12.7, 11.4, 10.9; other residual settings: docs/decisions.md
-    "residual within 0.1 W on walks and runs"). The issue asks for 3 cm: a shortfall."""
+    (6.9, 7.0, 5.7; the tracker as it was: 12.7, 11.4, 10.9; other residual settings:
+    docs/decisions/projection.md "residual within 0.1 W on walks and runs"). The issue asks for 3 cm: a
+    shortfall."""
     from physmotion.eval.projection_quality import measure_projection
     from physmotion.physics.surface import ground_on_surface
 

@@ -61,7 +61,7 @@ def test_residual_held_over_two_steps_stands_over_four_rocks(real_walk: np.ndarr
     """The default holds the residual over 2 simulation steps (180 Hz) and stands as still as every-step
     updates. Held over 4 (90 Hz, the sampling preset's) with the tracker of that measurement it rocks a
     standing body: MPJPE peaks near 34 mm after 2 s and then settles, where every-step updates hold 4 mm
-    (docs/decisions.md: "held root residual"), guarded at that level."""
+    (docs/decisions/projection.md: "held root residual"), guarded at that level."""
     model, ref = _standing_reference(real_walk, seconds=3.0)
     every_step = simulate(model, ref, ModelBasedTracker(model), HumanoidConfig(residual_every=1))
     default = simulate(model, ref, ModelBasedTracker(model), HumanoidConfig())
