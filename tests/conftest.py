@@ -7,7 +7,7 @@ runs both, in two pytest-xdist workers. A test whose fixtures build or import th
 ``hdm05_results``) is marked slow here
 (:func:`pytest_collection_modifyitems`); the fast tier builds :data:`SMALL_CLIPS`, a few real clips
 of every source and split, instead (``small_built_dir``, ``small_built329_dir``), and trains its tiny
-models on them.
+denoisers on them (the tiny evaluator needs the whole build: retrieval takes 32 motions per split).
 
 Every directory fixture of a whole session is built once per test run, whatever the number of xdist
 workers: the first worker builds it under a file lock in the run's shared temporary folder, the others
@@ -149,7 +149,7 @@ SMALL_CLIPS = (
     "bandai2_dataset-2_run_normal_003",
     "bandai2_dataset-2_walk-turn-left_normal_002", "bandai2_dataset-2_walk-turn-right_normal_002",
     "bandai2_dataset-2_walk-turn-right_normal_003", "bandai2_dataset-2_wave-right-hand_masculine_001",
-    "bandai2_dataset-2_wave-both-hands_normal_001",  # a train split of at least a batch (32) for the evaluator
+    "bandai2_dataset-2_wave-both-hands_normal_001",  # a train split of at least a batch (32 motions)
     # val
     "bandai2_dataset-2_walk-turn-left_youthful_001", "bandai2_dataset-2_wave-both-hands_masculine_001",
     "bandai2_dataset-2_walk_feminine_001",
@@ -275,12 +275,15 @@ def tiny_evaluator_config(data: Path, out: Path, **kw):
 
 
 @pytest.fixture(scope="session")
-def tiny_evaluator_dir(small_built_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A small evaluator trained for 3 epochs on the small build: real weights, a weak evaluator."""
+def tiny_evaluator_dir(built_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A small evaluator trained for 3 epochs on the bundled data: real weights, a weak evaluator.
+
+    On the whole build (so its tests are slow): retrieval on val and test needs 32 motions in each split,
+    more than a few clips give."""
     from physmotion.eval.train import train_evaluator
 
     def make(folder: Path) -> None:
-        train_evaluator(tiny_evaluator_config(small_built_dir, folder / "evaluator"), progress=False)
+        train_evaluator(tiny_evaluator_config(built_dir, folder / "evaluator"), progress=False)
 
     return _shared_dir(tmp_path_factory, "tiny_evaluator", make) / "evaluator"
 

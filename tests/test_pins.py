@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-from pathlib import Path
+import subprocess
+import sys
 
-from tests.make_pins import PIN, RUNS, compare, generate_pins, load_pin
+from tests.make_pins import PIN, RUNS, load_pin
 
 
-def test_generated_motions_match_the_pin(tmp_path: Path) -> None:
+def test_generated_motions_match_the_pin() -> None:
     """``physmotion generate`` with the shipped default model, its default sampler and 50 steps, for the
     prompts and seeds of ``tests/make_pins.py`` (two runs with ``--physics none``, one short ``post:1``
     run through the MuJoCo projection), gives the joints stored in ``tests/data/pins/generate.npz``:
@@ -21,9 +22,14 @@ def test_generated_motions_match_the_pin(tmp_path: Path) -> None:
     the motions changed. The pin was made on this project's 2-core x86-64 CI machine with the CPU build
     of torch; another CPU or library version may round differently: ``tests/make_pins.py --check``
     prints by how much, and the file's ``provenance`` entry says what made it.
+
+    It runs ``tests/make_pins.py --check`` in a fresh process, as a user's ``physmotion generate`` runs:
+    inside a full test session the same generation moved one motion by 4.8e-7 m (measured), from state
+    earlier tests leave in the process (likely the text encoder's cache of features it encoded in other
+    batches).
     """
     assert PIN.is_file(), "no pin: run .venv/bin/python tests/make_pins.py"
-    expected = load_pin()
-    assert len(expected) == sum(len(prompts) for prompts, *_ in RUNS)
-    problems = compare(expected, generate_pins(tmp_path))
-    assert not problems, "generated motions differ from the pin:\n" + "\n".join(problems)
+    assert len(load_pin()) == sum(len(prompts) for prompts, *_ in RUNS)
+    res = subprocess.run([sys.executable, str(PIN.parents[2] / "make_pins.py"), "--check"], capture_output=True,
+                         text=True, timeout=600, check=False)  # fmt: skip
+    assert res.returncode == 0, "generated motions differ from the pin:\n" + res.stdout + res.stderr[-3000:]
