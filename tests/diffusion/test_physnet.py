@@ -201,10 +201,11 @@ def test_feature_stats_travel_with_a_saved_model(built329_dir: Path, tmp_path: P
     torch.testing.assert_close(loaded.net.physics.acc_std, std[263:329], rtol=0, atol=0)
 
 
-def test_trained_biomo_model_carries_the_datas_statistics(tiny_biomo, built329_dir: Path) -> None:
+def test_trained_biomo_model_carries_the_datas_statistics(tiny_biomo, small_built329_dir: Path) -> None:
     """train_denoiser fills the statistics from the data before training; the model it saves (the EMA
-    weights) must carry them too, or sampling reads the physical network's m/s^2 in the wrong units."""
-    mean, std = _stats(built329_dir)
+    weights) must carry them too, or sampling reads the physical network's m/s^2 in the wrong units.
+    (tiny_biomo trains on the small 329-d build, tests/conftest.py.)"""
+    mean, std = _stats(small_built329_dir)
     assert tiny_biomo.denoiser.arch == "biomo" and tiny_biomo.denoiser.feature_dim == 329
     torch.testing.assert_close(tiny_biomo.net.physics.acc_mean, mean[263:329], rtol=0, atol=0)
     torch.testing.assert_close(tiny_biomo.net.physics.acc_std, std[263:329], rtol=0, atol=0)
