@@ -88,6 +88,7 @@ def test_clean_clip_stays(model, clean):
     assert _mpjpe_mm(out, clean) < 1.2 * _mpjpe_mm(low_pass(clean, 4.0), clean)
 
 
+@pytest.mark.slow  # a quality check: the shipped model refines a whole noisy clip (about 10-20 s)
 def test_noisy_clip_beats_the_low_pass_filter(model, clean, noisy):
     out = refine(model, noisy, 20, RefineConfig(strength=0.3))
     filtered = low_pass(noisy, 4.0)
