@@ -14,7 +14,11 @@ from rich.table import Table
 
 from physmotion.conventions import FLOOR_JOINTS, FLOOR_SURFACE, FPS, MAX_FRAMES, MAX_TEXT_TOKENS, MIN_FRAMES
 from physmotion.errors import PhysmotionError, PhysmotionWarning
-from physmotion.io.rigs import RIGS  # the --rig help lists the tables
+
+# The rig tables' names for `import --rig`'s help (physmotion.io.rigs.RIGS, which imports scipy: not
+# imported for --help; tests/test_cli_cold.py checks the two agree).
+RIG_NAMES = ("bandai", "cmu_bvh_cgspeed_max", "cmu_bvh_cgspeed_max_scaled_m", "cmu_asf", "cmu_iclone_cc_base",
+             "mixamo", "mixamo_plain", "smpl22")  # fmt: skip
 
 HELP = {"help_option_names": ["-h", "--help"]}  # -h everywhere, on the app and every sub-app
 
@@ -75,14 +79,15 @@ BVH_MAPPING_HELP = ("JSON file naming the .bvh's joint (or End Site, '<parent>_e
                     "as for `import` (docs/examples/mapping_bandai.json).")
 
 
+SHIPPED_MODELS = Path(__file__).resolve().parent / "models"
+
+
 def _model_dir(model: Path | None) -> Path | None:
     """A --model as given, or a shipped model's folder where a bare name (``morph``) names one and no
     folder of that name exists here: model names work from any directory."""
     if model is None or model.exists() or len(model.parts) != 1:
         return model
-    from physmotion.diffusion.model import DEFAULT_MODEL_DIR
-
-    shipped = DEFAULT_MODEL_DIR.parent / model.name
+    shipped = SHIPPED_MODELS / model.name  # diffusion.model.DEFAULT_MODEL_DIR's folder, without torch
     return shipped if (shipped / "config.json").is_file() else model
 
 
@@ -174,7 +179,7 @@ def import_motion(
     path: Path | None = typer.Argument(None, help="A .bvh or .amc file (an .amc needs --asf)."),
     out: Path | None = typer.Option(None, "-o", "--out", help="Output .npz (or .bvh)."),
     rig: str | None = typer.Option(
-        None, help=f"Rig table: {', '.join(RIGS)}; guessed if left out. '--rig list' describes them."
+        None, help=f"Rig table: {', '.join(RIG_NAMES)}; guessed if left out. '--rig list' describes them."
     ),
     mapping: Path | None = typer.Option(
         None, help="JSON file naming the file's joint for each of our 22 joints, plus optional units, "
@@ -188,7 +193,7 @@ def import_motion(
 ) -> None:
     """Import one mocap file to the 22-joint skeleton at 20 fps, Y up, facing +Z, its stance soles on the
     floor (y = 0)."""
-    from physmotion.io.rigs import describe_rig
+    from physmotion.io.rigs import RIGS, describe_rig
 
     if rig == "list":
         for name, table in RIGS.items():
@@ -396,14 +401,20 @@ def refine_cmd(
 
 @app.command("generate")
 def generate_cmd(
-    texts: list[str] = typer.Argument(
-        ..., help="One or more captions, e.g. \"a person walks forward\". The text encoder reads the first "
+    texts: list[str] | None = typer.Argument(
+        None, show_default=False, help="One or more captions, e.g. \"a person walks forward\" (or --prompts FILE). "
+        "The text encoder reads the first "
         f"{MAX_TEXT_TOKENS} tokens of each (special tokens included): a longer caption is cut there, with "
         "a warning. Words the model never saw in its training captions get a warning too (only for a "
         "model folder with a vocabulary.txt, as the shipped model has)."),
     out: Path = typer.Option(Path("out"), "-o", "--out", help="Output folder: each motion becomes "
                              "<caption>_s<seed>_<k>.npz, .bvh and .gif (k: sample of that caption), and "
                              "the run is appended to generate.json there."),
+    prompts: Path | None = typer.Option(
+        None, "--prompts", help="A UTF-8 file of prompts, one a line, generated in one batch by one process: "
+        "'a person jumps | 3.5' (or a tab before the number) gives that motion's seconds; blank lines and "
+        "lines starting with # are skipped. A line without seconds takes --seconds, or its length is "
+        "predicted from its text; --seconds, when given, applies to every line."),
     seconds: float | None = typer.Option(
         None, help=f"Length of each motion in seconds, {MIN_FRAMES / FPS:g} to {MAX_FRAMES / FPS:g} (the "
         "model's range: another model may allow less); left out, each prompt's length is predicted from its "
@@ -439,6 +450,20 @@ def generate_cmd(
     """Generate motions from text: .npz, .bvh and a GIF preview per sample.
 
     Unset options take GenerateConfig's and the model's sampler defaults (the values the help quotes)."""
+    prompt_file = None
+    if prompts is not None:
+        if texts:
+            raise PhysmotionError("give prompts as arguments or in --prompts FILE, not both")
+        from physmotion.text.prompts import read_prompts
+
+        prompt_file = read_prompts(prompts)
+        texts = [p.text for p in prompt_file]
+    elif not texts:
+        raise PhysmotionError("give a prompt, e.g. physmotion generate \"a person walks forward\", or --prompts FILE")
+    model = _model_dir(model)
+    _check_generate_early(texts, model, prompt_file, prompts, seconds=seconds, num=num, physics=physics,
+                          sampler=sampler, steps=steps, eta=eta, cfg_scale=cfg_scale, phys_scale=phys_scale,
+                          speed=speed)  # fmt: skip
     from physmotion.diffusion.model import DEFAULT_MODEL_DIR, MotionDiffusion
     from physmotion.diffusion.samplers import default_sampler
     from physmotion.generate import (
@@ -458,7 +483,6 @@ def generate_cmd(
     cfg = cfg.at_fine_step() if fine_step else cfg
     cfg = cfg.with_controller(controller, _opt_str(policy))
     check_outputs(texts, out, cfg, overwrite)
-    model = _model_dir(model)
     net = MotionDiffusion.load(model)
     cfg.sampler = _with(default_sampler(net), sampler=sampler, steps=steps, eta=eta, cfg_scale=cfg_scale,
                         phys_scale=phys_scale, speed=speed)  # fmt: skip
@@ -472,12 +496,24 @@ def generate_cmd(
         where = f" (in {_quote(text)})" if len(texts) > 1 else ""
         _warn(f"the model never saw {', '.join(repr(w) for w in words)} in training{where}; "
               "expect a generic motion")  # fmt: skip
+    lengths = sources = None
+    own = [p for p in prompt_file or () if p.seconds is not None]
+    if own and seconds is not None:
+        _warn(f"--seconds {seconds:g} applies to every prompt, also to the {len(own)} line(s) of {prompts} that "
+              "give their own seconds")  # fmt: skip
+    elif own:  # each line's own seconds; the others predicted from their text
+        rest = [p.text for p in prompt_file if p.seconds is None]
+        predicted = iter(chosen_lengths(rest, cfg, net)) if rest else iter(())
+        chosen = [(round(p.seconds * FPS), "given") if p.seconds is not None else next(predicted) for p in prompt_file]
+        lengths, sources = [n for n, _ in chosen], [s for _, s in chosen]
     if seconds is None:
-        for text, (frames, _) in dict(zip(texts, chosen_lengths(texts, cfg, net))).items():
-            console.print(f"length: {frames / FPS:.2f} s for {_quote(text)} (predicted from the text; "
-                          "--seconds sets it)", highlight=False)  # fmt: skip
+        chosen = zip(lengths, sources) if lengths is not None else chosen_lengths(texts, cfg, net)
+        for text, (frames, source) in dict(zip(texts, chosen)).items():
+            if source == "predicted":
+                console.print(f"length: {frames / FPS:.2f} s for {_quote(text)} (predicted from the text; "
+                              "--seconds sets it)", highlight=False)  # fmt: skip
     with _step_bar("generating") as tick:
-        result = generate(texts, cfg, net, on_step=tick)
+        result = generate(texts, cfg, net, on_step=tick, lengths=lengths, length_source=sources)
     paths = write_outputs(result, out, cfg, preview=preview, overwrite=overwrite, model=model,
                           unknown=unknown)
     console.print(f"wrote {len(result.motions)} motion(s) to {out} ({len(paths)} files, run logged in "
@@ -485,6 +521,56 @@ def generate_cmd(
     phys = physics_summary(result)
     if phys:
         console.print(f"physics: {phys}", highlight=False)
+
+
+def _check_generate_early(texts, model, prompt_file, prompts, *, seconds, num, physics, sampler, steps, eta,
+                          cfg_scale, phys_scale, speed) -> None:
+    """generate's argument checks that need neither torch nor the model's weights (its config.json only),
+    so that a mistake is told in a fraction of a second. The same checks run again, with the loaded
+    model, in check_request and SamplerConfig.check: this only finds errors sooner, with the same words."""
+    import json
+    import math
+
+    from physmotion.physics_mode import PhysicsMode
+
+    if any(not t.strip() for t in texts):
+        raise PhysmotionError("text is empty: describe a motion, e.g. 'a person walks forward'")
+    mode = PhysicsMode.parse(physics) if physics is not None else None
+    if sampler is not None:
+        from physmotion.diffusion.schedule import SAMPLERS
+
+        if sampler not in SAMPLERS:
+            raise PhysmotionError(f"unknown sampler {sampler!r}: choose one of {', '.join(SAMPLERS)}")
+    if steps is not None:
+        if not 1 <= steps <= 1000:
+            raise PhysmotionError(f"steps must be between 1 and 1000, got {steps}")
+        if mode is not None:
+            mode.hook_steps(steps)
+    if eta is not None and not 0.0 <= eta <= 1.0:
+        raise PhysmotionError(f"eta must be between 0 and 1, got {eta}")
+    if cfg_scale is not None and not math.isfinite(cfg_scale):
+        raise PhysmotionError(f"cfg_scale must be a finite number, got {cfg_scale}")
+    if phys_scale is not None and not (math.isfinite(phys_scale) and phys_scale >= 0):
+        raise PhysmotionError(f"phys_scale must be a number >= 0, got {phys_scale}")
+    if speed is not None and not (math.isfinite(speed) and 0.0 < speed <= 4.0):
+        raise PhysmotionError(f"speed must be in (0, 4], got {speed}")
+    if num is not None and not 1 <= num <= 256:
+        raise PhysmotionError(f"--num must be between 1 and 256, got {num}")
+    try:
+        config = json.loads(((model or SHIPPED_MODELS / "default") / "config.json").read_text(encoding="utf-8"))
+        den = config["denoiser"]
+        max_frames, arch = int(den.get("max_frames", MAX_FRAMES)), den.get("arch", "transformer")
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return  # loading the model names what is wrong with it
+    lo, hi = MIN_FRAMES / FPS, max_frames / FPS
+    if seconds is not None and (not math.isfinite(seconds) or not lo <= seconds <= hi):
+        raise PhysmotionError(f"--seconds must be between {lo:g} and {hi:g} (the model's range), got {seconds:g}")
+    if prompt_file is not None and seconds is None:
+        from physmotion.text.prompts import check_seconds
+
+        check_seconds(prompt_file, lo, hi, str(prompts))
+    if arch != "biomo" and (phys_scale is not None or (speed is not None and speed != 1.0)):
+        raise PhysmotionError(f"--phys-scale and --speed need a BioMoDiffuse model (arch biomo); this one is a {arch}")
 
 
 def _quote(text: str, limit: int = 40) -> str:

@@ -126,16 +126,18 @@ def generate(
     model: MotionDiffusion | None = None,
     on_step: Callable[[int, int], None] | None = None,
     lengths: Sequence[int] | None = None,
+    length_source: Sequence[str] | None = None,
 ) -> GenerateResult:
     """Generate ``config.num`` motions per text. Deterministic under ``config.seed``.
 
     lengths: frames per text (evaluation matches the test motions' lengths); default ``config.seconds``,
     or where that is None each text's length predicted from it (:func:`chosen_lengths`).
+    length_source: with ``lengths``, per text "given" or "predicted" as recorded (default all "given").
     """
     cfg = config or GenerateConfig()
     model = model or MotionDiffusion.load()
     check_request(texts, cfg, model)
-    sources = ["given"] * len(texts)
+    sources = list(length_source) if length_source is not None and lengths is not None else ["given"] * len(texts)
     if lengths is None:
         lengths, sources = (list(z) for z in zip(*chosen_lengths(texts, cfg, model)))
     elif len(lengths) != len(texts) or not all(MIN_FRAMES // 2 <= n <= model.denoiser.max_frames for n in lengths):

@@ -42,6 +42,12 @@ WHOLE_COLLECTION = frozenset({"import_results", "imported_clips", "built", "buil
 
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "slow: runs over the whole mocap manifest (seconds); still run in CI")
+    # On-disk caches (prompt embeddings, physmotion/text/encoder.py) go to a folder of this run, never the
+    # user's ~/.cache/physmotion; processes the tests start inherit it.
+    if "PHYSMOTION_CACHE_DIR" not in os.environ:
+        import tempfile
+
+        os.environ["PHYSMOTION_CACHE_DIR"] = tempfile.mkdtemp(prefix="physmotion-test-cache-")
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

@@ -77,6 +77,8 @@ def sampling_scheduler(name: str, steps: int, cfg: DiffusionConfig):
         raise ValueError(f"unknown sampler {name!r}: choose one of {', '.join(SAMPLERS)}")
     if not 1 <= steps <= cfg.num_train_timesteps:
         raise ValueError(f"steps must be in 1..{cfg.num_train_timesteps}, got {steps}")
+    if name == "ddim" and cfg.beta_schedule in _BETAS:
+        return DDIM(cfg, steps)
     from diffusers import DDIMScheduler, DDPMScheduler, DPMSolverMultistepScheduler
 
     if name == "ddpm":
@@ -93,3 +95,77 @@ def sampling_scheduler(name: str, steps: int, cfg: DiffusionConfig):
         sched.set_timesteps(timesteps=karras_timesteps(sched.alphas_cumprod.numpy(), steps))
         sched.set_begin_index(0)
     return sched
+
+
+def _cosine_betas(n: int):
+    """diffusers' ``betas_for_alpha_bar`` (``squaredcos_cap_v2``), the same float32 numbers."""
+    import math
+
+    import torch
+
+    def alpha_bar(t: float) -> float:
+        return math.cos((t + 0.008) / 1.008 * math.pi / 2) ** 2
+
+    return torch.tensor([min(1 - alpha_bar((i + 1) / n) / alpha_bar(i / n), 0.999) for i in range(n)],
+                        dtype=torch.float32)  # fmt: skip
+
+
+def _linear_betas(n: int):
+    import torch
+
+    return torch.linspace(0.0001, 0.02, n, dtype=torch.float32)
+
+
+_BETAS = {"squaredcos_cap_v2": _cosine_betas, "linear": _linear_betas}
+
+
+class _Step:
+    def __init__(self, prev_sample, pred_original_sample) -> None:
+        self.prev_sample, self.pred_original_sample = prev_sample, pred_original_sample
+
+
+class DDIM:
+    """``sampling_scheduler("ddim")``: diffusers' ``DDIMScheduler`` as we configure it (x0 prediction, no
+    clipping, ``set_alpha_to_one``, trailing spacing), the same float32 arithmetic in the same order,
+    without importing diffusers (whose import pulls ``torch._dynamo``: 2-3 s of a cold start).
+    ``tests/diffusion/test_schedule.py`` checks it against diffusers bit for bit."""
+
+    init_noise_sigma = 1.0
+
+    def __init__(self, cfg: DiffusionConfig, steps: int) -> None:
+        import torch
+
+        self.num_train_timesteps = cfg.num_train_timesteps
+        self.betas = _BETAS[cfg.beta_schedule](cfg.num_train_timesteps)
+        self.alphas = 1.0 - self.betas
+        self.alphas_cumprod = torch.cumprod(self.alphas, dim=0)
+        self.final_alpha_cumprod = torch.tensor(1.0)
+        self.set_timesteps(steps)
+
+    def set_timesteps(self, steps: int) -> None:
+        import torch
+
+        self.num_inference_steps = steps
+        ratio = self.num_train_timesteps / steps
+        timesteps = np.round(np.arange(self.num_train_timesteps, 0, -ratio)).astype(np.int64) - 1
+        self.timesteps = torch.from_numpy(timesteps)
+
+    def step(self, model_output, timestep, sample, eta: float = 0.0, generator=None, **_):
+        import torch
+
+        prev_timestep = timestep - self.num_train_timesteps // self.num_inference_steps
+        alpha_prod_t = self.alphas_cumprod[timestep]
+        alpha_prod_t_prev = self.alphas_cumprod[prev_timestep] if prev_timestep >= 0 else self.final_alpha_cumprod
+        beta_prod_t = 1 - alpha_prod_t
+        pred_original_sample = model_output
+        pred_epsilon = (sample - alpha_prod_t ** (0.5) * pred_original_sample) / beta_prod_t ** (0.5)
+        beta_prod_t_prev = 1 - alpha_prod_t_prev
+        variance = (beta_prod_t_prev / beta_prod_t) * (1 - alpha_prod_t / alpha_prod_t_prev)
+        std_dev_t = eta * variance ** (0.5)
+        pred_sample_direction = (1 - alpha_prod_t_prev - std_dev_t**2) ** (0.5) * pred_epsilon
+        prev_sample = alpha_prod_t_prev ** (0.5) * pred_original_sample + pred_sample_direction
+        if eta > 0:
+            noise = torch.randn(model_output.shape, generator=generator, device=model_output.device,
+                                dtype=model_output.dtype)  # fmt: skip
+            prev_sample = prev_sample + std_dev_t * noise
+        return _Step(prev_sample, pred_original_sample)

