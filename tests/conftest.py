@@ -47,7 +47,9 @@ def pytest_configure(config: pytest.Config) -> None:
     if "PHYSMOTION_CACHE_DIR" not in os.environ:
         import tempfile
 
-        os.environ["PHYSMOTION_CACHE_DIR"] = tempfile.mkdtemp(prefix="physmotion-test-cache-")
+        cache = tempfile.mkdtemp(prefix="physmotion-test-cache-")
+        os.environ["PHYSMOTION_CACHE_DIR"] = cache
+        config.add_cleanup(lambda: shutil.rmtree(cache, ignore_errors=True))
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
