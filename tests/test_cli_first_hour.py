@@ -281,7 +281,7 @@ def test_cli_every_writer_checks_its_output_first(walk_npz: Path, mocap_dir: Pat
     cases = {
         "generate -o file": (["generate", "walk", *CHEAP, "-o", afile], "is a file, not a folder"),
         "evaluate -o under a file": (["evaluate", "--data", build, "--quick", "-o", afile / "r"], "is a file"),
-        "import existing": (["import", mocap_dir / BANDAI_WALK, "-o", existing], "exists; delete it"),
+        "import existing": (["import", mocap_dir / BANDAI_WALK, "-o", existing], "exists; pass --overwrite"),
         "export existing": (["export", walk_npz, "-o", existing], "exists; pass --overwrite"),
         "export to a folder": (["export", walk_npz, "-o", full], "is a folder"),
         "project existing": (["project", walk_npz, "-o", existing], "exists; pass --overwrite"),

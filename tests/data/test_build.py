@@ -19,6 +19,7 @@ from physmotion.data.build import (
     windows,
 )
 from physmotion.data.stats import dataset_stats
+from tests.conftest import WHOLE_BUILD
 from physmotion.errors import PhysmotionError, ShapeError
 from physmotion.features.humanml3d import FEATURE_DIM, recover_from_ric
 from physmotion.io.importer import load_manifest
@@ -98,7 +99,7 @@ def test_mirrored_copies_have_mirrored_captions(built_dir: Path) -> None:
 
 @pytest.mark.slow  # a second build of the whole collection
 def test_two_builds_are_identical(built_dir: Path, mocap_dir: Path, tmp_path: Path) -> None:
-    again = build_dataset(mocap_dir, tmp_path / "again", BuildConfig(), progress=False).out
+    again = build_dataset(mocap_dir, tmp_path / "again", WHOLE_BUILD, progress=False).out
     for name in ("train.txt", "val.txt", "test.txt", "index.csv", "Mean.npy", "Std.npy"):
         assert (again / name).read_bytes() == (built_dir / name).read_bytes(), name
     a, b = dataset_stats(built_dir), dataset_stats(again)
