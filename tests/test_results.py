@@ -238,6 +238,30 @@ def refine_quotes() -> list[str]:
     ]
 
 
+def imitator_quotes() -> list[str]:
+    """P's controllers on captured and generated motion (results/imitator_captured.json, _generated.json)."""
+    cap = {(r["category"], r["controller"]): r for r in _load("imitator_captured.json")["rows"]}
+    gen = _load("imitator_generated.json")["rows"]
+
+    def mean(ctrl: str, key: str) -> float:
+        return float(np.mean([r[key] for r in gen if r["controller"] == ctrl]))
+
+    def reset(ctrl: str) -> str:
+        return f"{100 * np.mean([r['resets'] > 0 for r in gen if r['controller'] == ctrl]):.0f} %"
+
+    t, c, p = cap["all", "tracker"], cap["all", "tracker at cap"], cap["all", "policy"]
+    return [
+        f"tracker {100 * t['success']:.1f} % tracked at {t['mpjpe_mm']:.1f} mm with a residual of "
+        f"{t['residual_force_mean']:.3f} W",
+        f"tracker at the bound {100 * c['success']:.1f} % at {c['mpjpe_mm']:.1f} mm",
+        f"policy {100 * p['success']:.1f} % at {p['mpjpe_mm']:.1f} mm with {p['residual_force_mean']:.3f} W",
+        f"outputs with a reset {reset('tracker')} (tracker), {reset('policy')} (policy)",
+        f"none+floor in {100 * mean('tracker', 'below_floor'):.0f} % and {100 * mean('policy', 'below_floor'):.0f} %",
+        f"residual {mean('tracker', 'residual_force'):.3f} W and {mean('policy', 'residual_force'):.3f} W, torque "
+        f"{mean('tracker', 'residual_torque'):.3f} W m and {mean('policy', 'residual_torque'):.3f} W m",
+    ]
+
+
 QUOTES = {  # which doc quotes which result file
     ("docs results", "evaluate"): evaluate_quotes,
     ("docs results", "bench"): bench_quotes,
@@ -249,6 +273,7 @@ QUOTES = {  # which doc quotes which result file
     ("docs results", "new prompts morph"): new_prompts_morph_quotes,
     ("docs results", "biomodiffuse"): biomodiffuse_quotes,
     ("docs results", "refine"): refine_quotes,
+    ("docs results", "imitator"): imitator_quotes,
     ("results", "evaluate"): evaluate_quotes,
     ("results", "schedule"): schedule_quotes,
     ("model card", "evaluate"): evaluate_quotes,
@@ -270,7 +295,7 @@ def _section(text: str, source: str) -> str:
              "dynamic": "projection_dynamic",
              "new prompts": "new_prompts_default", "new prompts morph": "new_prompts_morph",
              "new prompts fine": "new_prompts_fine",
-             "biomodiffuse": "results/biomodiffuse", "refine": "results/refine"}
+             "biomodiffuse": "results/biomodiffuse", "refine": "results/refine", "imitator": "results/imitator_"}
     marker = files[source]
     return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
 
