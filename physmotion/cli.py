@@ -102,8 +102,8 @@ def data_build(
     seed: int = typer.Option(0, help="Salt of the take -> split assignment."),
     mirror: bool = typer.Option(True, help="Add left/right mirrored copies, as HumanML3D does."),
     pad_short: bool = typer.Option(True, help="Hold a clip shorter than 2 s still at both ends up to 2 s "
-                                   "(HumanML3D's shortest motion) instead of skipping it; --no-pad-short builds "
-                                   "as before 2026-11-28."),
+                                   "(HumanML3D's shortest motion) instead of skipping it; --no-pad-short skips "
+                                   "them, as the shipped models' data was built."),
     jobs: int = typer.Option(0, help="Worker processes (0: one per core)."),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
     activations: bool = typer.Option(False, "--activations", help="Also cache muscle-activation stand-ins "

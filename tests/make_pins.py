@@ -66,7 +66,7 @@ def provenance() -> str:
 
 # Sampling alone (physics "none") is bit-identical whatever the thread count. P's output is not: with
 # OMP_NUM_THREADS=1 instead of this machine's 2 threads, the post:1 motion moved by up to 1.07e-6 m (2,445
-# of 2,640 values; measured 2026-11-28), float32 rounding in the simulation's inputs. Projected motions
+# of 2,640 values), float32 rounding in the simulation's inputs. Projected motions
 # are compared to ATOL_PHYSICS metres (0.01 mm), far below any change in behaviour.
 ATOL_PHYSICS = 1e-5
 

@@ -42,9 +42,9 @@ _TOLERANCE = 0.005  # m: the metrics' Penetrate tolerance (MetricParams.toleranc
 STANCE: str = "stance"
 """The import floor: the stance soles over the whole clip on y = 0 (this module)."""
 FRAME0: str = "frame0"
-"""The import floor until 2026-11-28: frame 0's lowest foot joint on y = 0. Close to the data convention
-that the physics projection P takes as input (:mod:`physmotion.physics.projection`), and what P's
-benches and tests were measured on, bit for bit."""
+"""The earlier import floor (docs/decisions/data.md: "import floor"): frame 0's lowest foot joint on
+y = 0. Close to the data convention that the physics projection P takes as input
+(:mod:`physmotion.physics.projection`), and what P's benches and tests were measured on, bit for bit."""
 IMPORT_FLOORS: tuple[str, ...] = (STANCE, FRAME0)
 
 

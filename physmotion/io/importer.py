@@ -126,7 +126,7 @@ def import_clip(
     (:mod:`physmotion.io.mapping`), whose units, up axis and fps rank just after the arguments;
     asf: the skeleton of a bare AMC path (default: the only ``.asf`` next to it, or
     ``<subject>.asf`` for ``<subject>_<trial>.amc``); floor: ``"stance"`` (the stance soles on y = 0,
-    :mod:`physmotion.io.floor`) or ``"frame0"`` (frame 0's lowest foot joint: the rule before 2026-11-28,
+    :mod:`physmotion.io.floor`) or ``"frame0"`` (frame 0's lowest foot joint: the earlier rule,
     which the physics projection's benches and tests feed P).
     Every failure is a :class:`PhysmotionError` with a one-line message naming the file.
     """
