@@ -114,14 +114,7 @@ class HFTextEncoder:
         new = sorted({t for t in texts if t not in self._cache})
         for i in range(0, len(new), 64):
             self._encode_new(new[i : i + 64])
-        toks = [self._cache[t][0] for t in texts]
-        width = max(len(t) for t in toks)
-        tokens = torch.zeros(len(texts), width, self.dim)
-        mask = torch.zeros(len(texts), width, dtype=torch.bool)
-        for i, t in enumerate(toks):
-            tokens[i, : len(t)], mask[i, : len(t)] = t, True
-        pooled = torch.stack([self._cache[t][1] for t in texts])
-        return TextFeatures(tokens, mask, pooled)
+        return _padded(texts, self._cache, self.dim)
 
 
 def minilm_path() -> Path:
@@ -273,14 +266,20 @@ class MiniLMEncoder:
             if not isinstance(t, str) or not t.strip():
                 raise PhysmotionError("text is empty: give a caption such as 'a person walks forward'")
         self._ensure(texts)
-        toks = [self._cache[t][0] for t in texts]
-        width = max(len(t) for t in toks)
-        tokens = torch.zeros(len(texts), width, self.dim)
-        mask = torch.zeros(len(texts), width, dtype=torch.bool)
-        for i, t in enumerate(toks):
-            tokens[i, : len(t)], mask[i, : len(t)] = t, True
-        pooled = torch.stack([self._cache[t][1] for t in texts])
-        return TextFeatures(tokens, mask, pooled)
+        return _padded(texts, self._cache, self.dim)
+
+
+def _padded(texts: list[str], cache: dict, dim: int) -> TextFeatures:
+    """The cached features of ``texts`` (text -> (token features (L, dim), pooled (dim,), ...)) as one
+    zero-padded batch with its mask."""
+    toks = [cache[t][0] for t in texts]
+    width = max(len(t) for t in toks)
+    tokens = torch.zeros(len(texts), width, dim)
+    mask = torch.zeros(len(texts), width, dtype=torch.bool)
+    for i, t in enumerate(toks):
+        tokens[i, : len(t)], mask[i, : len(t)] = t, True
+    pooled = torch.stack([cache[t][1] for t in texts])
+    return TextFeatures(tokens, mask, pooled)
 
 
 _LOADED: dict[str, MiniLMEncoder | HFTextEncoder] = {}
