@@ -34,6 +34,7 @@ from physmotion.diffusion.denoiser import DenoiserConfig
 from physmotion.diffusion.train import TrainConfig
 
 MOCAP_DIR = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "mocap"
+HDM05_DIR = MOCAP_DIR.parent / "hdm05"
 
 
 # Fixtures that import or build the whole mocap collection (minutes on 2 cores): their tests are slow.
@@ -96,6 +97,14 @@ def mocap_dir() -> Path:
     if not (MOCAP_DIR / "manifest.csv").is_file():
         pytest.fail(f"the mocap data is missing: expected {MOCAP_DIR.resolve()}/manifest.csv")
     return MOCAP_DIR.resolve()
+
+
+@pytest.fixture(scope="session")
+def hdm05_dir() -> Path:
+    """``../shared/data/hdm05`` (HDM05's ASF/AMC clips, Latin-1 headers); a failure when missing."""
+    if not (HDM05_DIR / "manifest.csv").is_file():
+        pytest.fail(f"the HDM05 data is missing: expected {HDM05_DIR.resolve()}/manifest.csv")
+    return HDM05_DIR.resolve()
 
 
 @pytest.fixture(scope="session")

@@ -17,15 +17,6 @@ from physmotion.data.build import BuildConfig, BuildReport, build_dataset, captu
 from physmotion.errors import PhysmotionError
 from physmotion.io import ClipInfo, load_manifest
 
-HDM05_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "hdm05"
-
-
-@pytest.fixture(scope="session")
-def hdm05_dir() -> Path:
-    if not (HDM05_DIR / "manifest.csv").is_file():
-        pytest.fail(f"the HDM05 data is missing: expected {HDM05_DIR.resolve()}/manifest.csv")
-    return HDM05_DIR.resolve()
-
 
 def _index(root: Path) -> list[dict[str, str]]:
     with open(root / "index.csv", newline="") as f:

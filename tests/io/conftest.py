@@ -22,17 +22,6 @@ def clip(manifest: list[ClipInfo]) -> Callable[[str], ClipInfo]:
     return by_id.__getitem__
 
 
-HDM05_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "hdm05"
-
-
-@pytest.fixture(scope="session")
-def hdm05_dir() -> Path:
-    """``../shared/data/hdm05`` (HDM05's ASF/AMC clips, Latin-1 headers); a failure when missing."""
-    if not (HDM05_DIR / "manifest.csv").is_file():
-        pytest.fail(f"the HDM05 data is missing: expected {HDM05_DIR.resolve()}/manifest.csv")
-    return HDM05_DIR.resolve()
-
-
 @pytest.fixture(scope="session")
 def hdm05_manifest(hdm05_dir: Path) -> list[ClipInfo]:
     return load_manifest(hdm05_dir)
