@@ -74,7 +74,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=2, help="rounds over all modes; the best time counts")
     parser.add_argument("--biomo", default=None, help="a BioMoDiffuse model folder to time beside the others")
     parser.add_argument("--morph", default=None,
-                        help="a Morph-tuned model folder (physmotion/models/morph): times its none, post:1 "
+                        help="a Morph-tuned model folder (physmotion/weights/morph): times its none, post:1 "
                              "and morph")
     args = parser.parse_args()
     model = MotionDiffusion.load(args.model)

@@ -14,6 +14,7 @@ from rich.table import Table
 
 from physmotion.conventions import FLOOR_JOINTS, FLOOR_SURFACE, FPS, MAX_FRAMES, MAX_TEXT_TOKENS, MIN_FRAMES
 from physmotion.errors import PhysmotionError, PhysmotionWarning
+from physmotion.paths import WEIGHTS_DIR
 
 # The rig tables' names for `import --rig`'s help (physmotion.io.rigs.RIGS, which imports scipy: not
 # imported for --help; tests/test_cli_cold.py checks the two agree).
@@ -79,7 +80,6 @@ BVH_MAPPING_HELP = ("JSON file naming the .bvh's joint (or End Site, '<parent>_e
                     "as for `import` (docs/examples/mapping_bandai.json).")
 
 
-SHIPPED_MODELS = Path(__file__).resolve().parent / "models"
 
 
 def _model_dir(model: Path | None) -> Path | None:
@@ -87,7 +87,7 @@ def _model_dir(model: Path | None) -> Path | None:
     folder of that name exists here: model names work from any directory."""
     if model is None or model.exists() or len(model.parts) != 1:
         return model
-    shipped = SHIPPED_MODELS / model.name  # diffusion.model.DEFAULT_MODEL_DIR's folder, without torch
+    shipped = WEIGHTS_DIR / model.name  # diffusion.model.DEFAULT_MODEL_DIR's folder, without torch
     return shipped if (shipped / "config.json").is_file() else model
 
 
@@ -418,7 +418,7 @@ def generate_cmd(
     seconds: float | None = typer.Option(
         None, help=f"Length of each motion in seconds, {MIN_FRAMES / FPS:g} to {MAX_FRAMES / FPS:g} (the "
         "model's range: another model may allow less); left out, each prompt's length is predicted from its "
-        "text by the length model (physmotion/models/length), printed and recorded in generate.json "
+        "text by the length model (physmotion/weights/length), printed and recorded in generate.json "
         "(default: predicted from the text)."),
     physics: str | None = typer.Option(
         None, help="none, none+floor (plain sampling, shifted onto the floor as well as a constant "
@@ -557,7 +557,7 @@ def _check_generate_early(texts, model, prompt_file, prompts, *, seconds, num, p
     if num is not None and not 1 <= num <= 256:
         raise PhysmotionError(f"--num must be between 1 and 256, got {num}")
     try:
-        config = json.loads(((model or SHIPPED_MODELS / "default") / "config.json").read_text(encoding="utf-8"))
+        config = json.loads(((model or WEIGHTS_DIR / "default") / "config.json").read_text(encoding="utf-8"))
         den = config["denoiser"]
         max_frames, arch = int(den.get("max_frames", MAX_FRAMES)), den.get("arch", "transformer")
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
@@ -739,7 +739,7 @@ def train_evaluator_cmd(
 def train_length_cmd(
     data: Path = typer.Option(..., help="Built dataset folder (`data build`): its captions and clip lengths."),
     out: Path = typer.Option(..., "-o", "--out", help="Output folder: model.safetensors, card.json, README.md "
-                             "(the shipped one is physmotion/models/length)."),
+                             "(the shipped one is physmotion/weights/length)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace a length model already in --out."),
 ) -> None:
     """Train the length model `generate` asks when --seconds is not given (seconds from the caption)."""

@@ -110,7 +110,7 @@ def check_request(texts: Sequence[str], config: GenerateConfig, model: MotionDif
 
 def chosen_lengths(texts: Sequence[str], config: GenerateConfig, model: MotionDiffusion) -> list[tuple[int, str]]:
     """Per text, (frames, "given") from ``config.seconds``, or where that is None (frames, "predicted") from
-    the length model (physmotion/models/length, as MoMask predicts a length from the text), within the
+    the length model (physmotion/weights/length, as MoMask predicts a length from the text), within the
     model's range."""
     if config.seconds is not None:
         return [(round(config.seconds * FPS), "given")] * len(texts)
@@ -378,7 +378,7 @@ def write_outputs(
         "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "prompts": texts,
         "seed": config.seed,
-        "model": str(model) if model is not None else "default (physmotion/models/default)",
+        "model": str(model) if model is not None else "default (physmotion/weights/default)",
         "settings": settings,
         "preview": preview,
         "unknown_words": {t: w for t, w in (unknown or {}).items() if w},

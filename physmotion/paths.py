@@ -14,6 +14,9 @@ from physmotion.errors import PhysmotionError
 
 OutputKind = Literal["file", "folder"]
 
+# The shipped weights, one folder per model (default, morph, evaluator, imitator, length).
+WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
+
 
 class OutputPathError(PhysmotionError):
     """An output path that cannot or must not be written (wrong kind, not writable, would clobber)."""

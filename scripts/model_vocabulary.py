@@ -1,7 +1,7 @@
 """Write a model folder's vocabulary.txt: the words of the captions it was trained on.
 
     python scripts/model_vocabulary.py --data data_build/mocap --max-frames 120 \
-        --model physmotion/models/default
+        --model physmotion/weights/default
 
 `physmotion generate` warns about prompt words outside this file (physmotion/text/vocabulary.py).
 --max-frames is the length filter of the training run (the default model's: 120, its --crop at the

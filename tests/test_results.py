@@ -28,8 +28,8 @@ DOCS = {
     "cli": ROOT / "docs" / "cli.md",
     "architecture": ROOT / "docs" / "architecture.md",
     "decisions": ROOT / "docs" / "decisions" / "README.md",
-    "model card": ROOT / "physmotion" / "models" / "default" / "README.md",
-    "morph card": ROOT / "physmotion" / "models" / "morph" / "README.md",
+    "model card": ROOT / "physmotion" / "weights" / "default" / "README.md",
+    "morph card": ROOT / "physmotion" / "weights" / "morph" / "README.md",
 }
 
 

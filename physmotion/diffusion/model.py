@@ -2,7 +2,7 @@
 
 On disk a model is a folder: ``model.safetensors`` (the EMA weights, plus ``normalizer.mean`` and
 ``normalizer.std``) and ``config.json`` (denoiser and diffusion configs, text encoder, training data and
-its licence tags). The shipped default lives in ``physmotion/models/default``.
+its licence tags). The shipped default lives in ``physmotion/weights/default``.
 """
 
 from __future__ import annotations
@@ -17,9 +17,10 @@ from physmotion.conventions import FLOOR_JOINTS, FLOORS
 from physmotion.diffusion.denoiser import DenoiserConfig, build_denoiser
 from physmotion.diffusion.schedule import DiffusionConfig
 from physmotion.errors import PhysmotionError
+from physmotion.paths import WEIGHTS_DIR
 from physmotion.features.normalize import Normalizer
 
-DEFAULT_MODEL_DIR = Path(__file__).resolve().parent.parent / "models" / "default"
+DEFAULT_MODEL_DIR = WEIGHTS_DIR / "default"
 
 
 @dataclass

@@ -19,7 +19,7 @@ Embeddings are L2-normalised, so distances (MM-Dist, Diversity) lie in [0, 2]; t
 of Guo's evaluator, whose numbers in papers cannot be compared with ours.
 
 On disk an evaluator is a model folder (:mod:`physmotion.checkpoint`); the shipped one is
-``physmotion/models/evaluator``.
+``physmotion/weights/evaluator``.
 """
 
 from __future__ import annotations
@@ -38,9 +38,10 @@ from physmotion.diffusion.denoiser import positional_encoding
 from physmotion.errors import PhysmotionError, ShapeError
 from physmotion.features.humanml3d import FEATURE_DIM
 from physmotion.features.normalize import Normalizer
+from physmotion.paths import WEIGHTS_DIR
 from physmotion.text.encoder import DEFAULT_ENCODER, MINILM_DIM, TextFeatures, load_text_encoder
 
-DEFAULT_EVALUATOR_DIR = Path(__file__).resolve().parent.parent / "models" / "evaluator"
+DEFAULT_EVALUATOR_DIR = WEIGHTS_DIR / "evaluator"
 CONTACT_DIMS = 4  # the last 4 of the 263: foot contacts
 
 

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from physmotion.errors import PhysmotionError
+from physmotion.paths import WEIGHTS_DIR
 from physmotion.physics.humanoid import layout
 from physmotion.physics.tracking import ModelBasedTracker, Reference, TrackingConfig
 
@@ -145,7 +146,7 @@ class PolicyController:
         return self.tracker.residual(data, ref, step, substeps)
 
 
-DEFAULT_POLICY = Path(__file__).resolve().parent.parent / "models" / "imitator"
+DEFAULT_POLICY = WEIGHTS_DIR / "imitator"
 
 
 def load_policy(path: str | Path | None = None) -> Policy:

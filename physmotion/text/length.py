@@ -12,7 +12,7 @@ caption of each clip, its length the whole clip's captured length (its windows j
 ``pad_short`` left out), because the build cuts a long clip into windows of at most 196 frames while
 the caption describes the whole clip; lengths are capped to the model's range.
 
-The model is a 384-vector, a centre and a bias in ``physmotion/models/length/model.safetensors`` (3 KB),
+The model is a 384-vector, a centre and a bias in ``physmotion/weights/length/model.safetensors`` (3 KB),
 with its card (``README.md``, ``card.json``): ``physmotion train length`` makes it. Closed form, so the
 same data give the same weights.
 """
@@ -30,8 +30,9 @@ import numpy as np
 
 from physmotion.conventions import FPS, MAX_FRAMES, MIN_FRAMES
 from physmotion.errors import PhysmotionError
+from physmotion.paths import WEIGHTS_DIR
 
-LENGTH_MODEL_DIR = Path(__file__).resolve().parents[1] / "models" / "length"
+LENGTH_MODEL_DIR = WEIGHTS_DIR / "length"
 LO_SECONDS, HI_SECONDS = MIN_FRAMES / FPS, MAX_FRAMES / FPS  # the models' range: 2 to 9.8 s
 ALPHAS = (0.01, 0.03, 0.05, 0.1, 0.3, 1.0, 3.0)  # ridge strengths tried; the best on val is kept
 # prompts the card reports, with the captions of the data whose lengths they are compared with
@@ -128,7 +129,7 @@ class LengthPredictor:
 
     @classmethod
     def load(cls, folder: str | Path | None = None) -> LengthPredictor:
-        """The length model in ``folder`` (default: the shipped ``physmotion/models/length``)."""
+        """The length model in ``folder`` (default: the shipped ``physmotion/weights/length``)."""
         from safetensors import safe_open
 
         path = Path(folder or LENGTH_MODEL_DIR) / MODEL_FILE
@@ -249,7 +250,7 @@ def _write_card(out: Path, data: Path, examples: list[LengthExample], report: Le
         terms.append("HDM05's **share-alike** terms (`SA`: CC BY-SA 3.0)")
     build = " ".join(f"--source {s}" for s in card["data"]["sources"])
     lines = [
-        "# The length model (`physmotion/models/length`)",
+        "# The length model (`physmotion/weights/length`)",
         "",
         "What `physmotion generate` asks for each prompt's length when `--seconds` is not given (as MoMask",
         "predicts a length from the text): ridge regression from the frozen MiniLM sentence vector (384-d, the",
@@ -258,7 +259,7 @@ def _write_card(out: Path, data: Path, examples: list[LengthExample], report: Le
         "figures below. Made by `physmotion/text/length.py`, closed form (the same build gives the same weights):",
         "",
         f"    physmotion data build {build} -o BUILD",
-        "    physmotion train length --data BUILD -o physmotion/models/length --overwrite",
+        "    physmotion train length --data BUILD -o physmotion/weights/length --overwrite",
         "",
         (f"- **Data**: the captions of {card['data']['clips']} clips of that build: {report.examples['train']} "
          f"train, {report.examples['val']} val and {report.examples['test']} test examples, one per distinct "

@@ -1,4 +1,4 @@
-"""The shipped evaluator (physmotion/models/evaluator) on the real test split: the issue's acceptance."""
+"""The shipped evaluator (physmotion/weights/evaluator) on the real test split: the issue's acceptance."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""The shipped Morph-tuned model (physmotion/models/morph): loads, says what it saw, and generates."""
+"""The shipped Morph-tuned model (physmotion/weights/morph): loads, says what it saw, and generates."""
 
 from pathlib import Path
 
