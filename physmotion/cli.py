@@ -650,7 +650,7 @@ def train_denoiser_cmd(
     """Train a text-to-motion denoiser (DDPM, x0 prediction, EMA, classifier-free text dropout).
 
     Unset options take TrainConfig's and DenoiserConfig's defaults (the values the help quotes)."""
-    from physmotion.diffusion.denoiser import DenoiserConfig
+    from physmotion.nets.denoiser import DenoiserConfig
     from physmotion.diffusion.model import MotionDiffusion
     from physmotion.diffusion.train import TrainConfig, train_denoiser
     from physmotion.paths import check_output

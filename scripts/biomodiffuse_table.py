@@ -22,7 +22,7 @@ from pathlib import Path
 
 import torch
 
-from physmotion.diffusion.denoiser import DenoiserConfig
+from physmotion.nets.denoiser import DenoiserConfig
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.train import STATE_FILE, TrainConfig, train_denoiser
 from physmotion.eval.ablation import (

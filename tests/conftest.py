@@ -30,7 +30,7 @@ import numpy as np
 import pytest
 
 from physmotion.data.build import BuildConfig, BuildReport, build_dataset
-from physmotion.diffusion.denoiser import DenoiserConfig
+from physmotion.nets.denoiser import DenoiserConfig
 from physmotion.diffusion.train import TrainConfig
 
 MOCAP_DIR = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "mocap"

@@ -174,7 +174,7 @@ def _help_defaults(*command: str) -> dict[str, str]:
 def test_help_defaults_are_the_dataclasses() -> None:
     """Options default to None and the command fills in only what was given: the dataclasses hold every
     default, and the values the help quotes must be theirs."""
-    from physmotion.diffusion.denoiser import DenoiserConfig
+    from physmotion.nets.denoiser import DenoiserConfig
     from physmotion.diffusion.train import TrainConfig
     from physmotion.eval.table import EvaluateConfig
     from physmotion.generate import GenerateConfig

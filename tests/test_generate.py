@@ -172,7 +172,7 @@ def test_a_329d_model_projects_in_its_own_features(imported_clips) -> None:
     The denoiser has random weights; its statistics come from real clips."""
     import torch
 
-    from physmotion.diffusion.denoiser import DenoiserConfig, build_denoiser
+    from physmotion.nets.denoiser import DenoiserConfig, build_denoiser
     from physmotion.diffusion.model import MotionDiffusion
     from physmotion.diffusion.schedule import DiffusionConfig
     from physmotion.features.biomech import FEATURE_DIM_BIOMECH, extract_features_329

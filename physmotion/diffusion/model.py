@@ -14,7 +14,7 @@ import torch
 
 from physmotion.checkpoint import load_folder, save_folder
 from physmotion.conventions import FLOOR_JOINTS, FLOORS
-from physmotion.diffusion.denoiser import DenoiserConfig, build_denoiser
+from physmotion.nets.denoiser import DenoiserConfig, build_denoiser
 from physmotion.diffusion.schedule import DiffusionConfig
 from physmotion.errors import PhysmotionError
 from physmotion.paths import WEIGHTS_DIR

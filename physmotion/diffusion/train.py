@@ -30,7 +30,7 @@ import torch
 
 from physmotion.conventions import MAX_FRAMES
 from physmotion.data.dataset import MotionDataset, collate
-from physmotion.diffusion.denoiser import DenoiserConfig, build_denoiser
+from physmotion.nets.denoiser import DenoiserConfig, build_denoiser
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.schedule import DiffusionConfig, training_scheduler
 from physmotion.errors import PhysmotionError

@@ -34,7 +34,7 @@ from torch import nn
 
 from physmotion.checkpoint import load_folder, save_folder
 from physmotion.conventions import MAX_FRAMES
-from physmotion.diffusion.denoiser import positional_encoding
+from physmotion.nets.denoiser import positional_encoding
 from physmotion.errors import PhysmotionError, ShapeError
 from physmotion.features.humanml3d import FEATURE_DIM
 from physmotion.features.normalize import Normalizer

@@ -153,9 +153,9 @@ def test_bf16_is_used_only_where_the_hardware_has_it(built_dir: Path, tmp_path: 
 
 import os
 
-from physmotion.diffusion.backbone import DenoiserConfig
-from physmotion.diffusion.denoiser import build_denoiser
-from physmotion.diffusion.physnet import BioMoDenoiser
+from physmotion.nets.backbone import DenoiserConfig
+from physmotion.nets.denoiser import build_denoiser
+from physmotion.nets.physnet import BioMoDenoiser
 from physmotion.diffusion.train import LOSS_FILE, loss_terms
 from tests.conftest import tiny_biomo_config
 

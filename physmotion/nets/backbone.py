@@ -1,7 +1,7 @@
 """What both denoiser backbones share: their config and the timestep + caption condition.
 
-:mod:`physmotion.diffusion.denoiser` (MDM's transformer, and ``build_denoiser``) and
-:mod:`physmotion.diffusion.unet` (BioMoDiffuse's 1D UNet) both build on this module; the UNet never
+:mod:`physmotion.nets.denoiser` (MDM's transformer, and ``build_denoiser``) and
+:mod:`physmotion.nets.unet` (BioMoDiffuse's 1D UNet) both build on this module; the UNet never
 imports the transformer's module.
 """
 
@@ -31,7 +31,7 @@ class DenoiserConfig:
     ff_mult: int = 4
     dropout: float = 0.1
     max_frames: int = MAX_FRAMES
-    phys_hidden: int = 128  # "biomo": width of the physical network (physmotion.diffusion.physnet)
+    phys_hidden: int = 128  # "biomo": width of the physical network (physmotion.nets.physnet)
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -11,8 +11,8 @@ attention, so one batch can mix lengths.
 Classifier-free guidance: ``drop_text`` (B,) bool replaces a caption by the null condition (no text
 tokens, zero sentence vector), as MDM's ``cond_mask_prob`` does.
 
-The config and the time/text condition live in :mod:`physmotion.diffusion.backbone`, which the UNet
-(:mod:`physmotion.diffusion.unet`) shares; :func:`build_denoiser` builds either backbone.
+The config and the time/text condition live in :mod:`physmotion.nets.backbone`, which the UNet
+(:mod:`physmotion.nets.unet`) shares; :func:`build_denoiser` builds either backbone.
 """
 
 from __future__ import annotations
@@ -22,8 +22,8 @@ import math
 import torch
 from torch import nn
 
-from physmotion.diffusion.backbone import DenoiserConfig, TimeTextCondition
-from physmotion.diffusion.unet import UNetDenoiser
+from physmotion.nets.backbone import DenoiserConfig, TimeTextCondition
+from physmotion.nets.unet import UNetDenoiser
 from physmotion.text.encoder import TextFeatures
 
 __all__ = ["DenoiserConfig", "TransformerDenoiser", "build_denoiser", "positional_encoding"]
@@ -80,7 +80,7 @@ def build_denoiser(config: DenoiserConfig) -> nn.Module:
     if config.arch == "unet":
         return UNetDenoiser(config)
     if config.arch == "biomo":
-        from physmotion.diffusion.physnet import BioMoDenoiser
+        from physmotion.nets.physnet import BioMoDenoiser
 
         return BioMoDenoiser(config)
     raise ValueError(f"unknown denoiser architecture {config.arch!r} (transformer, unet or biomo)")

@@ -13,7 +13,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from physmotion.diffusion.backbone import DenoiserConfig, TimeTextCondition
+from physmotion.nets.backbone import DenoiserConfig, TimeTextCondition
 from physmotion.text.encoder import TextFeatures
 
 

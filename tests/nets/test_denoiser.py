@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from physmotion.diffusion.denoiser import DenoiserConfig, build_denoiser
+from physmotion.nets.denoiser import DenoiserConfig, build_denoiser
 from physmotion.text.encoder import TextFeatures
 
 

@@ -11,9 +11,9 @@ import pytest
 import torch
 
 from physmotion.conventions import FPS
-from physmotion.diffusion.backbone import DenoiserConfig
+from physmotion.nets.backbone import DenoiserConfig
 from physmotion.diffusion.model import MotionDiffusion
-from physmotion.diffusion.physnet import ACCEL_DIM, INERTIA_RANK, MUSCLES, BioMoDenoiser, PhysicalNetwork
+from physmotion.nets.physnet import ACCEL_DIM, INERTIA_RANK, MUSCLES, BioMoDenoiser, PhysicalNetwork
 from physmotion.diffusion.schedule import DiffusionConfig
 from physmotion.features.biomech import FEATURE_DIM_BIOMECH, SLICES_BIOMECH
 from physmotion.features.normalize import Normalizer

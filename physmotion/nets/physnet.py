@@ -36,8 +36,8 @@ import torch.nn.functional as F
 from torch import nn
 
 from physmotion.conventions import FPS
-from physmotion.diffusion.backbone import DenoiserConfig, timestep_embedding
-from physmotion.diffusion.unet import UNetDenoiser
+from physmotion.nets.backbone import DenoiserConfig, timestep_embedding
+from physmotion.nets.unet import UNetDenoiser
 from physmotion.features.biomech import FEATURE_DIM_BIOMECH, SLICES_BIOMECH
 from physmotion.physics.activations import ACTIVATION_CHANNELS
 from physmotion.skeleton import NUM_JOINTS
