@@ -1,0 +1,43 @@
+"""P's preset registry: every name builds a valid config, the sampling preset is the classmethod's, and an
+unknown name fails in one line that lists the known ones."""
+
+from __future__ import annotations
+
+import pytest
+
+from physmotion.errors import PhysmotionError
+from physmotion.physics.presets import describe, preset, preset_names
+from physmotion.physics.projection import ProjectionConfig
+
+
+def test_every_preset_builds_and_describes_itself() -> None:
+    names = preset_names()
+    assert {"plain", "sampling", "fine"} <= set(names) and len(set(names)) == len(names)
+    for name in names:
+        assert isinstance(preset(name), ProjectionConfig)
+        assert describe(name) and "\n" not in describe(name)
+    assert preset("plain") is not preset("plain")  # a fresh config each call: callers may change it
+
+
+def test_presets_agree_with_the_config_methods() -> None:
+    assert preset("plain") == ProjectionConfig()
+    assert preset("sampling") == ProjectionConfig.sampling()
+    assert preset("fine") == ProjectionConfig().at_fine_step()
+    assert preset("sampling_fine") == ProjectionConfig.sampling().at_fine_step()
+    assert preset("ilc") == ProjectionConfig(ilc_passes=2)
+
+
+def test_the_tracker_history_changes_one_thing_at_a_time() -> None:
+    v01, held = preset("tracker_v01"), preset("plain_held_residual")
+    assert not v01.tracking.feet_balance and not v01.shaping.flatten_toe_off and not v01.shaping.ballistic_flight
+    assert (held.tracking.residual_force, held.humanoid.residual_every) == (0.3, 4)
+    assert preset("tracker_v01_toe_off").shaping.flatten_toe_off
+    assert preset("tracker_v01_feet_balance").tracking.feet_balance
+    both = preset("tracker_v01_toe_off_feet_balance")
+    assert both.tracking.feet_balance and both.shaping.flatten_toe_off and not both.shaping.ballistic_flight
+
+
+def test_an_unknown_preset_names_the_known_ones() -> None:
+    with pytest.raises(PhysmotionError, match="unknown projection preset 'fast'; known: plain, sampling") as exc:
+        preset("fast")
+    assert "\n" not in str(exc.value)
