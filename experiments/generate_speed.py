@@ -1,6 +1,7 @@
 """Generation wall time by physics mode, one table from one run (compare the ratios).
 
-Usage: python bench/generate.py [--model DIR] [--morph DIR] [--biomo DIR] [--seconds 6] [--repeats 2]
+Usage: python -m experiments.generate_speed [--model DIR] [--morph DIR] [--biomo DIR] [--seconds 6] [--repeats 2]
+       [--out results/generate_speed]
 Modes: none, morph (Morph's inference: pre-processing, one P, imitation selection), post:4 (as many
 projections as PhysDiff's default), physdiff:end:4,space:1, and PhysDiff with every projection at 1/720 s
 (``generate --fine-step``); batches of 1
@@ -13,7 +14,7 @@ preset's reset instead of Morph's selection) and morph, beside the base model's:
 sampling at the base model's cost, and one P instead of PhysDiff's four.
 
 With ``--biomo DIR`` (a BioMoDiffuse model, e.g. ``runs/biomo_ablation/biomo`` from
-``scripts/biomodiffuse_table.py``) a row times it without projection at its own sampler (SDE DPM-Solver++,
+``experiments/biomodiffuse.py``) a row times it without projection at its own sampler (SDE DPM-Solver++,
 10 steps, physics guidance: three network passes per step) against the transformer's ``none`` row.
 
 The last row is the physics floor: plain sampling plus the time PhysDiff spends inside MuJoCo's ``mj_step``.
@@ -21,6 +22,9 @@ At batch 1 it is clocked during the best timed run (one motion is projected in t
 the batch is generated once more with the projection in this process, and its stepping time is divided by
 the cores (the worker processes' best case). No speed-up of the projection's Python can bring PhysDiff
 below this ratio at this simulation rate.
+
+P: the ``sampling`` preset (physdiff, post), ``sampling_fine`` in the 1/720 s row, and ``plain`` for morph
+(physmotion/physics/presets.py). Writes ``<out>.md`` and ``<out>.json``.
 """
 
 from __future__ import annotations
@@ -34,13 +38,13 @@ from contextlib import contextmanager, nullcontext
 from dataclasses import replace
 
 import mujoco
-from rich.console import Console
-from rich.table import Table
 
+from experiments._results import markdown_table, run_meta, write_results
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.samplers import default_sampler
 from physmotion.eval.prompts import PHYSICS_PROMPTS
 from physmotion.generate import GenerateConfig, generate
+from physmotion.physics.presets import preset
 
 MODES = ("none", "morph", "post:4", "physdiff:end:4,space:1")  # morph: Morph's inference, one P
 PHYSDIFF = MODES[-1]
@@ -67,7 +71,7 @@ def _mj_step_clock(total: list[float]) -> Iterator[None]:
         mujoco.mj_step = step
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--model", default=None)
     parser.add_argument("--seconds", type=float, default=6.0)
@@ -76,12 +80,13 @@ def main() -> None:
     parser.add_argument("--morph", default=None,
                         help="a Morph-tuned model folder (physmotion/weights/morph): times its none, post:1 "
                              "and morph")
-    args = parser.parse_args()
+    parser.add_argument("--out", default="results/generate_speed", help="writes OUT.md and OUT.json")
+    args = parser.parse_args(argv)
     model = MotionDiffusion.load(args.model)
-    base = GenerateConfig(seconds=args.seconds)
+    base = GenerateConfig(seconds=args.seconds, projection=preset("sampling"), morph_projection=preset("plain"))
     generate(PHYSICS_PROMPTS[:1], replace(base, physics="none"), model)  # warm-up: encoder load, first calls
     runs = {mode: (model, replace(base, physics=mode)) for mode in MODES}
-    runs[f"{PHYSDIFF} at 1/720 s"] = (model, replace(base, physics=PHYSDIFF).at_fine_step())
+    runs[f"{PHYSDIFF} at 1/720 s"] = (model, replace(base, physics=PHYSDIFF, projection=preset("sampling_fine")))
     if args.biomo:
         biomo = MotionDiffusion.load(args.biomo)
         runs[BIOMO] = (biomo, replace(base, physics="none", sampler=default_sampler(biomo)))
@@ -113,17 +118,19 @@ def main() -> None:
     with _mj_step_clock(inside):
         generate(PHYSICS_PROMPTS[:16], replace(config, projection=replace(config.projection, workers=1)), model)
     floor = {1: times["none", 1] + stepping, 16: times["none", 16] + inside[0] / (os.cpu_count() or 1)}
-    table = Table(title=f"generation wall time, {args.seconds:g} s motions, 50 DDIM steps (BioMoDiffuse: its own), "
-                        f"best of {max(1, args.repeats)}")
-    for col in ("mode", "batch 1 (s)", "batch 16 (s)", "s/motion at 16", "vs none, batch 1", "vs none, batch 16"):
-        table.add_column(col, justify="left" if col == "mode" else "right")
-    for mode in runs:
-        table.add_row(mode, f"{times[mode, 1]:.2f}", f"{times[mode, 16]:.2f}", f"{times[mode, 16] / 16:.2f}",
-                      f"{times[mode, 1] / times['none', 1]:.2f}x", f"{times[mode, 16] / times['none', 16]:.2f}x")
-    table.add_row("floor: none + PhysDiff's mj_step", f"{floor[1]:.2f}", f"{floor[16]:.2f}", f"{floor[16] / 16:.2f}",
-                  f"{floor[1] / times['none', 1]:.2f}x", f"{floor[16] / times['none', 16]:.2f}x")
-    Console(width=160, emoji=False).print(table)
-
+    title = (f"generation wall time, {args.seconds:g} s motions, 50 DDIM steps (BioMoDiffuse: its own), "
+             f"best of {max(1, args.repeats)}")
+    times.update({("floor: none + PhysDiff's mj_step", batch): floor[batch] for batch in (1, 16)})
+    rows = [(mode, f"{times[mode, 1]:.2f}", f"{times[mode, 16]:.2f}", f"{times[mode, 16] / 16:.2f}",
+             f"{times[mode, 1] / times['none', 1]:.2f}x", f"{times[mode, 16] / times['none', 16]:.2f}x")
+            for mode in dict.fromkeys(m for m, _ in times)]  # fmt: skip
+    header = ("mode", "batch 1 (s)", "batch 16 (s)", "s/motion at 16", "vs none, batch 1", "vs none, batch 16")
+    md = f"# {title}\n\n" + markdown_table(header, rows) + "\n"
+    print(md)
+    meta = run_meta(__file__, argv, {"physdiff, post": "sampling", f"{PHYSDIFF} at 1/720 s": "sampling_fine",
+                                     "morph": "plain"}, seconds=args.seconds, repeats=args.repeats)  # fmt: skip
+    seconds = {mode: {str(batch): t for (m, batch), t in times.items() if m == mode} for mode, _ in times}
+    write_results(args.out, md, {"meta": meta, "seconds": seconds})
 
 if __name__ == "__main__":
     main()

@@ -1,7 +1,7 @@
 """The learned imitation policy against the model-based tracker, inside P: one table from one run.
 
-Usage: python experiments/imitator.py generated [--seeds 0,1,2] [--categories run,jog,jump,hop,kick]
-       python experiments/imitator.py captured [--mocap ../shared/data/mocap,../shared/data/hdm05] [--limit N]
+Usage: python -m experiments.imitator generated [--seeds 0,1,2] [--categories run,jog,jump,hop,kick]
+       python -m experiments.imitator captured [--mocap ../shared/data/mocap,../shared/data/hdm05] [--limit N]
        (either with --policy DIR; default: the shipped one; --out results/imitator_<part>)
 
 generated: the unseen prompts (``eval.prompts.NEW_PROMPTS``) of the fast categories, 6 s each, PhysDiff's
@@ -11,7 +11,7 @@ residual force (fractions of body weight W) and torque (W x 1 m) of the last pro
 projection's MPJPE to the motion it was given (the denoiser's prediction at the last step).
 
 captured: every clip of the mocap folders, the plain P (no reset: imitation selection), per category of
-motion (``eval.projection_quality``, as ``scripts/projection_dynamic.py``): success, MPJPE, Float, Skate
+motion (``experiments.projection_quality``, as ``experiments/projection_dynamic.py``): success, MPJPE, Float, Skate
 and Penetrate of the input and of the simulation, root residual force and torque (mean and p95).
 
 Writes ``<out>.md`` (the table) and ``<out>.json`` (per-output rows and a meta block: command, commit,
@@ -22,8 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
-import subprocess
 import sys
 import time
 from dataclasses import replace
@@ -31,8 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments._results import run_meta, write_results
 from physmotion.conventions import FPS
-from physmotion.motion import write_atomic
+from physmotion.physics.presets import preset
 
 FAST = ("run", "jog", "jump", "hop", "kick")
 CONTROLLERS = ("tracker", "tracker at cap", "policy")  # "tracker at cap": its residual bounded as the policy's
@@ -51,20 +50,12 @@ def _with_controller(config, name: str, policy_dir: str | None):
     return replace(config, tracking=capped_tracking(config.tracking, cap))
 
 
-def _meta(args: argparse.Namespace, preset: str) -> dict:
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
-    cpu = platform.processor()
-    try:
-        cpu = next(line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
-                   if line.startswith("model name"))  # fmt: skip
-    except (OSError, StopIteration):
-        pass
+def _meta(args: argparse.Namespace, argv: list[str] | None, preset_name: str) -> dict:
     from physmotion.physics.policy import load_policy
 
     policy = load_policy(args.policy)
-    return {"command": " ".join(sys.argv), "commit": commit, "cpu": cpu, "date": time.strftime("%Y-%m-%d"),
-            "preset": preset, "policy": args.policy or "shipped", "policy_cap": policy.settings.cap,
-            "policy_card": {k: policy.card.get(k) for k in ("iterations", "samples", "wall_minutes", "hardware")}}
+    return run_meta(__file__, argv, preset_name, policy=args.policy or "shipped", policy_cap=policy.settings.cap,
+                    policy_card={k: policy.card.get(k) for k in ("iterations", "samples", "wall_minutes", "hardware")})
 
 
 def _phys(joints: np.ndarray, body) -> dict[str, float]:
@@ -74,7 +65,7 @@ def _phys(joints: np.ndarray, body) -> dict[str, float]:
     return physical_metrics(joints[None], FPS, body=HumanoidSurface([body]))
 
 
-def generated(args: argparse.Namespace) -> tuple[list[dict], dict]:
+def generated(args: argparse.Namespace, argv: list[str] | None = None) -> tuple[list[dict], dict]:
     from physmotion.diffusion.model import MotionDiffusion
     from physmotion.eval.prompts import NEW_PROMPTS
     from physmotion.generate import GenerateConfig, generate
@@ -84,7 +75,7 @@ def generated(args: argparse.Namespace) -> tuple[list[dict], dict]:
     for cat in args.categories.split(","):
         prompts = list(NEW_PROMPTS[cat])
         for seed in [int(s) for s in args.seeds.split(",")]:
-            base = GenerateConfig(seed=seed)
+            base = GenerateConfig(seed=seed, projection=preset("sampling"))
             floor = generate(prompts, replace(base, physics="none+floor"), model)
             outs = {}
             for ctrl in CONTROLLERS:
@@ -112,26 +103,23 @@ def generated(args: argparse.Namespace) -> tuple[list[dict], dict]:
             print(f"{cat} seed {seed} done", file=sys.stderr, flush=True)
             if args.partial:  # a long run leaves what it has measured so far
                 Path(args.partial).write_text(json.dumps(rows))
-    return rows, _meta(args, "sampling (generate's PhysDiff P)")
+    return rows, _meta(args, argv, "sampling")
 
 
-def captured(args: argparse.Namespace) -> tuple[list[dict], dict]:
-    from physmotion.eval.projection_quality import by_category, measure_clips
+def captured(args: argparse.Namespace, argv: list[str] | None = None) -> tuple[list[dict], dict]:
+    from experiments.projection_quality import by_category, measure_clips, spread
     from physmotion.io.importer import load_manifest
-    from physmotion.physics.projection import ProjectionConfig
 
-    clips = [c for folder in args.mocap.split(",") for c in load_manifest(folder)]
-    if args.limit:
-        clips = clips[:: max(1, len(clips) // args.limit)][: args.limit]
+    clips = spread([c for folder in args.mocap.split(",") for c in load_manifest(folder)], args.limit)
     rows = []
     for ctrl in CONTROLLERS:
         start = time.perf_counter()
-        measured = measure_clips(clips, _with_controller(ProjectionConfig(), ctrl, args.policy))
+        measured = measure_clips(clips, _with_controller(preset("plain"), ctrl, args.policy))
         seconds = (time.perf_counter() - start) / len(clips)
         for cat, row in by_category(clips, measured).items():
             rows.append({"controller": ctrl, "category": cat, **row, "seconds_per_clip": seconds})
         print(f"{ctrl} done", file=sys.stderr, flush=True)
-    return rows, _meta(args, "plain (ProjectionConfig())")
+    return rows, _meta(args, argv, "plain")
 
 
 def _table(rows: list[dict], part: str) -> str:
@@ -173,7 +161,7 @@ def _table(rows: list[dict], part: str) -> str:
     return "\n".join(lines)
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("part", choices=("generated", "captured"))
     parser.add_argument("--policy", default=None)
@@ -185,14 +173,12 @@ def main() -> None:
     parser.add_argument("--limit", type=int, default=0, help="captured: only N clips, evenly spread")
     parser.add_argument("--out", default=None)
     parser.add_argument("--partial", default=None, help="generated: rewrite the rows so far to this JSON file")
-    args = parser.parse_args()
-    rows, meta = generated(args) if args.part == "generated" else captured(args)
-    out = Path(args.out or f"results/imitator_{args.part}")
+    args = parser.parse_args(argv)
+    rows, meta = generated(args, argv) if args.part == "generated" else captured(args, argv)
     table = _table(rows, args.part)
     print(table)
     md = f"# P's controllers on {args.part} motion\n\n`{meta['command']}` (commit {meta['commit']}, {meta['cpu']})\n\n{table}\n"
-    write_atomic(out.with_suffix(".md"), lambda f: f.write(md), "w")
-    write_atomic(out.with_suffix(".json"), lambda f: f.write(json.dumps({"meta": meta, "rows": rows}, indent=2)), "w")
+    write_results(args.out or f"results/imitator_{args.part}", md, {"meta": meta, "rows": rows})
 
 
 if __name__ == "__main__":

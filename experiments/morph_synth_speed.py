@@ -1,11 +1,11 @@
 """Morph's synthetic data throughput: synthetic motions refined per second, and where the time goes.
 
-Usage: python bench/morph.py [--model DIR] [--data data_build/mocap] [--captions 16] [--per-caption 1]
-    [--workers 0] [--steps 50] [--ilc 0] [--run RUN]
+Usage: python -m experiments.morph_synth_speed [--model DIR] [--data data_build/mocap] [--captions 16]
+    [--per-caption 1] [--workers 0] [--steps 50] [--ilc 0] [--run RUN] [--out results/morph_synth_speed]
 Runs :func:`physmotion.morph.synth.synthesize` on the first ``--captions`` distinct train captions
 (lengths drawn from the train split, 50 DDIM steps, P with Morph's selection settings, ``--ilc`` passes of
 iterative learning control as `morph run --ilc`) into a temporary
-folder, and prints one table from its :class:`SynthReport`: items per second, the share of wall time in
+folder, and writes one table from its :class:`SynthReport` (``<out>.md``, ``<out>.json``): items per second, the share of wall time in
 sampling (the denoiser) and in P (pre-processing, projection, features and writing, waited for).
 The model is loaded before timing; the first batch pays the text encoder's and the worker pool's start.
 With ``--run RUN`` (a finished `physmotion morph run` folder) it adds each round's split of wall time
@@ -18,18 +18,17 @@ while P, MuJoCo on the CPU, would not: P would become the bottleneck of synthesi
 from __future__ import annotations
 
 import argparse
+import json
 import tempfile
 from pathlib import Path
 
-from rich.console import Console
-from rich.table import Table
-
+from experiments._results import markdown_table, run_meta, write_results
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.samplers import SamplerConfig
 from physmotion.morph.synth import SynthConfig, synthesize, train_captions
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--model", type=Path, default=None)
     parser.add_argument("--data", type=Path, default=Path("data_build/mocap"))
@@ -41,7 +40,8 @@ def main() -> None:
     parser.add_argument("--ilc", type=int, default=0,
                         help="P's iterative learning control passes, as `morph run --ilc`")
     parser.add_argument("--run", type=Path, default=None, help="a finished `morph run` folder")
-    args = parser.parse_args()
+    parser.add_argument("--out", default="results/morph_synth_speed", help="writes OUT.md and OUT.json")
+    args = parser.parse_args(argv)
 
     model = MotionDiffusion.load(args.model)
     captions = train_captions(args.data)[: args.captions]
@@ -50,32 +50,32 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         report = synthesize(args.model, args.data, Path(tmp) / "synth", cfg, captions=captions, model=model)
 
-    table = Table(title=f"Morph synthetic data: {report.done} motions ({len(captions)} captions x "
-                  f"{args.per_caption}), {args.steps} DDIM steps, batch {args.batch_size}, "
-                  f"ILC {args.ilc}")  # fmt: skip
-    for col in ("stage", "seconds", "share of wall", "motions / s"):
-        table.add_column(col, justify="right" if col != "stage" else "left")
+    title = (f"Morph synthetic data: {report.done} motions ({len(captions)} captions x {args.per_caption}), "
+             f"{args.steps} DDIM steps, batch {args.batch_size}, ILC {args.ilc}")
     wall = report.seconds or float("nan")
-    table.add_row("sampling (denoiser)", f"{report.sampling_seconds:.1f}",
-                  f"{report.sampling_seconds / wall:.0%}", f"{report.done / report.sampling_seconds:.2f}")
-    table.add_row("P (pre-process, project, features, write)", f"{report.physics_seconds:.1f}",
-                  f"{report.physics_seconds / wall:.0%}", f"{report.done / report.physics_seconds:.2f}")
-    table.add_row("synthetic data, total", f"{report.seconds:.1f}", "100%", f"{report.items_per_second:.2f}")
+    rows = [("sampling (denoiser)", f"{report.sampling_seconds:.1f}", f"{report.sampling_seconds / wall:.0%}",
+             f"{report.done / report.sampling_seconds:.2f}"),
+            ("P (pre-process, project, features, write)", f"{report.physics_seconds:.1f}",
+             f"{report.physics_seconds / wall:.0%}", f"{report.done / report.physics_seconds:.2f}"),
+            ("synthetic data, total", f"{report.seconds:.1f}", "100%", f"{report.items_per_second:.2f}")]
     for row in _rounds(args.run) if args.run else []:  # a whole round: synthesis, then fine-tuning
         total = row["synth_seconds"] + row["finetune_seconds"]
         for stage, key in (("synthesis", "synth_seconds"), ("fine-tuning", "finetune_seconds")):
-            table.add_row(f"round {row['round']}: {stage} ({row['synthetic_items']} motions, "
-                          f"{row['finetune_steps']} steps)", f"{row[key]:.0f}", f"{row[key] / total:.0%} of round",
-                          f"{row['synthetic_items'] / row[key]:.2f}")  # fmt: skip
-    Console(width=160).print(table)
+            rows.append((f"round {row['round']}: {stage} ({row['synthetic_items']} motions, "
+                         f"{row['finetune_steps']} steps)", f"{row[key]:.0f}", f"{row[key] / total:.0%} of round",
+                         f"{row['synthetic_items'] / row[key]:.2f}"))  # fmt: skip
+    md = f"# {title}\n\n" + markdown_table(("stage", "seconds", "share of wall", "motions / s"), rows) + "\n"
+    print(md)
+    figures = {"motions": report.done, "seconds": report.seconds, "sampling_seconds": report.sampling_seconds,
+               "physics_seconds": report.physics_seconds, "items_per_second": report.items_per_second}
+    meta = run_meta(__file__, argv, "plain", model=str(args.model), captions=len(captions),  # Morph's selection
+                    per_caption=args.per_caption, steps=args.steps, ilc_passes=args.ilc)
+    write_results(args.out, md, {"meta": meta, "figures": figures, "rows": rows})
 
 
 def _rounds(run: Path) -> list[dict]:
     """The rows of ``run/rounds.json`` (written by physmotion.morph.loop)."""
-    import json
-
     return json.loads((run / "rounds.json").read_text())["rounds"]
-
 
 if __name__ == "__main__":
     main()

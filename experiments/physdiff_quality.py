@@ -1,12 +1,13 @@
 """PhysDiff against no physics, no physics grounded on the floor, and post-processing, with the default
 model: one table from one run.
 
-Usage: python bench/physdiff_quality.py [--model DIR] [--prompts 32] [--seeds 0,1,2] [--json FILE]
-       python bench/physdiff_quality.py --set new [--model DIR] [--seeds 0] [--json FILE]
-       (either with --fine-step: every projection at 1/720 s, as ``generate --fine-step``; or --tau M: the
-       generation P's reset threshold, 0.15 m in the sampling preset)
-(--json also writes every mode's metrics per seed, e.g. results/physdiff_quality.json, which the README
-quotes and tests/test_results.py checks it against.)
+Usage: python -m experiments.physdiff_quality [--model DIR] [--prompts 32] [--seeds 0,1,2] [--out STEM]
+       python -m experiments.physdiff_quality --set new [--model DIR] [--seeds 0] [--out STEM]
+       (either with --fine-step: every projection at 1/720 s, P's presets ``sampling_fine`` and ``fine``, as
+       ``generate --fine-step``; or --tau M: the generation P's reset threshold, 0.15 m in the sampling preset)
+Writes ``<out>.md`` (the table) and ``<out>.json`` (every mode's metrics per seed and the meta block; default
+``results/physdiff_quality``, with ``--set new`` ``results/new_prompts_default``), which the docs quote and
+tests/test_results.py checks them against.
 Rows: none (as sampled), none+floor (each motion moved vertically by the constant shift that leaves it the
 least Phys-Err: the fair baseline), post:1, post:4 (as many projections as PhysDiff's default),
 physdiff:end:4,space:1. Metrics on the humanoid's MuJoCo geometry posed on the joints, with the body P
@@ -23,71 +24,110 @@ per category and mode, so that runs and jumps read on their own.
 from __future__ import annotations
 
 import argparse
-import json
+import time
+from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
-from rich.console import Console
-from rich.table import Table
 
+from experiments._results import markdown_table, run_meta, write_results
+from physmotion.conventions import FPS
 from physmotion.diffusion.model import MotionDiffusion
-from physmotion.eval.physics_modes import compare_modes
+from physmotion.eval.physics_columns import imitation_columns, metric_surface, reset_columns
 from physmotion.eval.prompts import NEW_PROMPTS, PHYSICS_PROMPTS
-from physmotion.generate import GenerateConfig
-from physmotion.motion import write_atomic
+from physmotion.generate import GenerateConfig, generate
+from physmotion.metrics import physical_metrics
+from physmotion.physics.presets import preset
+from physmotion.pipelines.modes import PhysicsMode
 
 MODES = ("none", "none+floor", "post:1", "post:4", "physdiff:end:4,space:1")
 NEW_SET_MODES = ("none", "none+floor", "post:1", "physdiff:end:4,space:1", "morph")
 COLUMNS = ("penetrate", "float", "skate", "phys_err")
 
 
-def main() -> None:
+def compare_modes(
+    model: MotionDiffusion,
+    prompts: Sequence[str],
+    modes: Sequence[str | PhysicsMode],
+    base: GenerateConfig | None = None,
+    surface: str = "humanoid",
+) -> dict[str, dict[str, float]]:
+    """Generate one motion per prompt in each mode; mode spelling -> physical metrics (mean over
+    motions) plus ``seconds_per_motion``, ``tracked`` (fraction of all projections, PhysDiff's four per
+    motion included, in which the humanoid never fell), :func:`reset_columns` and
+    :func:`imitation_columns`.
+
+    surface "humanoid": the humanoid's geometry, with the body P simulated for projected outputs and one
+    estimated from the joints otherwise; "joints": the joint-only surface model."""
+    base = base or GenerateConfig()
+    metric_surface(surface)  # a bad name fails before any work
+    results: dict[str, dict[str, float]] = {}
+    for mode in [PhysicsMode.parse(m) for m in modes]:
+        cfg = replace(base, physics=mode)
+        start = time.perf_counter()
+        out = generate(list(prompts), cfg, model)
+        seconds = time.perf_counter() - start
+        joints = np.stack([m.joints for m in out.motions])
+        row = physical_metrics(joints, FPS, body=metric_surface(surface, out.bodies))
+        row["seconds_per_motion"] = seconds / len(prompts)
+        log = out.projections
+        row["tracked"] = float(np.mean(log.tracked)) if log.tracked else float("nan")
+        row.update(reset_columns([out]))
+        row.update(imitation_columns([out]))
+        results[str(mode)] = row
+    return results
+
+
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--model", default=None)
     parser.add_argument("--prompts", type=int, default=32)
     parser.add_argument("--seeds", default="0,1,2", help="comma-separated sampling seeds")
-    parser.add_argument("--json", default=None, help="also write the per-seed metrics to this file")
+    parser.add_argument("--out", default=None, help="writes OUT.md and OUT.json")
     parser.add_argument("--set", choices=("physics", "new"), default="physics",
                         help="physics: the 32 prompts in our captions' words; new: the unseen prompts by category")
     parser.add_argument("--fine-step", action="store_true",
                         help="every projection at 1/720 s (generate --fine-step)")
     parser.add_argument("--tau", type=float, default=None,
                         help="the generation P's reset threshold in metres (default: the sampling preset's)")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(",")]
     model = MotionDiffusion.load(args.model)
-    base = GenerateConfig().at_fine_step() if args.fine_step else GenerateConfig()
+    presets = {"physdiff, post": "sampling_fine" if args.fine_step else "sampling",
+               "morph": "fine" if args.fine_step else "plain"}  # fmt: skip
+    base = GenerateConfig(projection=preset(presets["physdiff, post"]), morph_projection=preset(presets["morph"]))
     if args.tau is not None:
         base = replace(base, projection=replace(base.projection, tau=args.tau))
-    if args.set == "new":
-        _new_prompts(model, seeds, args.json, base)
-        return
-    prompts = PHYSICS_PROMPTS[: args.prompts]
+    run = _new_prompts if args.set == "new" else _physics_prompts
+    md, runs, settings = run(model, seeds, base, args.prompts)
+    print(md)
+    meta = run_meta(__file__, argv, presets, seeds=seeds, model_steps=model.info.get("steps"),
+                    sim_dt=base.projection.humanoid.sim_dt, tau=base.projection.tau, **settings)  # fmt: skip
+    default = "results/new_prompts_default" if args.set == "new" else "results/physdiff_quality"
+    write_results(args.out or default, md, {"meta": meta, "runs": runs})
+
+
+def _physics_prompts(model: MotionDiffusion, seeds: list[int], base: GenerateConfig,
+                     count: int) -> tuple[str, list[dict], dict]:  # fmt: skip
+    """The physics prompt set: one row per mode (means over the seeds); the table, the runs, the settings."""
+    prompts = PHYSICS_PROMPTS[:count]
     runs = [compare_modes(model, prompts, MODES, replace(base, seed=seed)) for seed in seeds]
-    table = Table(title=f"physics modes, {len(prompts)} prompts, 6 s each{_step(base)}, mean over seeds "
-                        f"{args.seeds}")
-    for col in ("mode", "Penetrate", "Float", "Skate", "Phys-Err", "vs none", "vs none+floor",
-                "per seed (vs none+floor)", "no fall", "reset", "resets", "s/motion"):
-        table.add_column(col, justify="left" if col == "mode" else "right")
+    title = (f"physics modes, {len(prompts)} prompts, 6 s each{_step(base)}, mean over seeds "
+             f"{','.join(map(str, seeds))}")
     ref = {m: np.mean([r[m]["phys_err"] for r in runs]) for m in ("none", "none+floor")}
+    rows = []
     for mode in MODES:
         mean = {k: float(np.mean([r[mode].get(k, np.nan) for r in runs]))
-                for k in (*COLUMNS, "tracked", "reset_rate", "resets", "seconds_per_motion")}
-        per_seed = "/".join(f"{100 * (r[mode]['phys_err'] / r['none+floor']['phys_err'] - 1):+.1f}"
-                            for r in runs)
+                for k in (*COLUMNS, "tracked", "reset_rate", "resets", "seconds_per_motion")}  # fmt: skip
+        per_seed = "/".join(f"{100 * (r[mode]['phys_err'] / r['none+floor']['phys_err'] - 1):+.1f}" for r in runs)
         changes = [f"{100 * (mean['phys_err'] / ref[b] - 1):+.1f}%" for b in ("none", "none+floor")]
         projected = mode.startswith(("post", "physdiff"))
         falls = [f"{100 * mean['tracked']:.0f}%", f"{100 * mean['reset_rate']:.0f}%", f"{mean['resets']:.2f}"]
-        table.add_row(mode, *(f"{mean[k]:.2f}" for k in COLUMNS), *changes, per_seed,
-                      *(falls if projected else ["-"] * 3), f"{mean['seconds_per_motion']:.2f}")
-    Console(width=160, emoji=False).print(table)
-    if args.json:
-        meta = {"prompts": len(prompts), "seconds": base.seconds, "seeds": seeds,
-                "model_steps": model.info.get("steps"), "sim_dt": base.projection.humanoid.sim_dt,
-                "tau": base.projection.tau}
-        runs = [{m: {k: (None if np.isnan(v) else v) for k, v in row.items()} for m, row in run.items()}
-                for run in runs]  # strict JSON: no NaN (the unprojected rows have no fall counts)
-        write_atomic(args.json, lambda f: f.write(json.dumps({"meta": meta, "runs": runs}, indent=2)), "w")
+        rows.append((mode, *(f"{mean[k]:.2f}" for k in COLUMNS), *changes, per_seed,
+                     *(falls if projected else ["-"] * 3), f"{mean['seconds_per_motion']:.2f}"))  # fmt: skip
+    header = ("mode", "Penetrate", "Float", "Skate", "Phys-Err", "vs none", "vs none+floor",
+              "per seed (vs none+floor)", "no fall", "reset", "resets", "s/motion")  # fmt: skip
+    return f"# {title}\n\n{markdown_table(header, rows)}\n", runs, {"prompts": len(prompts), "seconds": base.seconds}
 
 
 def _step(base: GenerateConfig) -> str:
@@ -96,15 +136,14 @@ def _step(base: GenerateConfig) -> str:
     return f", P at 1/{round(1 / p.humanoid.sim_dt)} s, reset at {p.tau:g} m"
 
 
-def _new_prompts(model: MotionDiffusion, seeds: list[int], json_path: str | None, base: GenerateConfig) -> None:
+def _new_prompts(model: MotionDiffusion, seeds: list[int], base: GenerateConfig,
+                 count: int) -> tuple[str, dict, dict]:  # fmt: skip
     """One row per category and mode of NEW_PROMPTS (means over the category's prompts and the seeds)."""
     runs = {cat: [compare_modes(model, list(prompts), NEW_SET_MODES, replace(base, seed=seed)) for seed in seeds]
             for cat, prompts in NEW_PROMPTS.items()}  # fmt: skip
-    table = Table(title=f"unseen prompts ({sum(map(len, NEW_PROMPTS.values()))}), 6 s each{_step(base)}, "
-                  f"seeds {','.join(map(str, seeds))}, model steps {model.info.get('steps')}")  # fmt: skip
-    for col in ("category", "mode", "Penetrate", "Float", "Skate", "Phys-Err", "vs none", "vs none+floor",
-                "reset", "imitation failed", "s/motion"):
-        table.add_column(col, justify="left" if col in ("category", "mode") else "right")
+    title = (f"unseen prompts ({sum(map(len, NEW_PROMPTS.values()))}), 6 s each{_step(base)}, "
+             f"seeds {','.join(map(str, seeds))}, model steps {model.info.get('steps')}")
+    rows = []
     for cat, cat_runs in runs.items():
         mean = {m: {k: float(np.mean([r[m].get(k, np.nan) for r in cat_runs]))
                     for k in (*COLUMNS, "reset_rate", "imitation_failure_rate", "seconds_per_motion")}
@@ -114,16 +153,13 @@ def _new_prompts(model: MotionDiffusion, seeds: list[int], json_path: str | None
             changes = [f"{100 * (row['phys_err'] / mean[b]['phys_err'] - 1):+.0f}%" for b in ("none", "none+floor")]
             rates = [f"{100 * row[k]:.0f}%" if np.isfinite(row[k]) else "-"
                      for k in ("reset_rate", "imitation_failure_rate")]  # fmt: skip
-            table.add_row(cat, mode, *(f"{row[k]:.2f}" for k in COLUMNS), *changes, *rates,
-                          f"{row['seconds_per_motion']:.2f}")
-    Console(width=160, emoji=False).print(table)
-    if json_path:
-        clean = {cat: [{m: {k: (None if np.isnan(v) else v) for k, v in row.items()} for m, row in run.items()}
-                       for run in cat_runs] for cat, cat_runs in runs.items()}  # fmt: skip
-        meta = {"set": "new", "prompts": {c: list(p) for c, p in NEW_PROMPTS.items()}, "seeds": seeds,
-                "model_steps": model.info.get("steps"), "model_info": model.info.get("morph", {}),
-                "sim_dt": base.projection.humanoid.sim_dt, "tau": base.projection.tau}
-        write_atomic(json_path, lambda f: f.write(json.dumps({"meta": meta, "runs": clean}, indent=2)), "w")
+            rows.append((cat, mode, *(f"{row[k]:.2f}" for k in COLUMNS), *changes, *rates,
+                         f"{row['seconds_per_motion']:.2f}"))
+    header = ("category", "mode", "Penetrate", "Float", "Skate", "Phys-Err", "vs none", "vs none+floor",
+              "reset", "imitation failed", "s/motion")  # fmt: skip
+    settings = {"set": "new", "prompts": {c: list(p) for c, p in NEW_PROMPTS.items()},
+                "model_info": model.info.get("morph", {})}  # fmt: skip
+    return f"# {title}\n\n{markdown_table(header, rows)}\n", runs, settings
 
 
 if __name__ == "__main__":

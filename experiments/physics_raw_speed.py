@@ -1,29 +1,27 @@
 """Raw speed of the MuJoCo humanoid and of retargeting, one table from one run.
 
-    python bench/physics_raw.py [--seconds 5] [--repeats 3]
+    python -m experiments.physics_raw_speed [--seconds 5] [--repeats 3] [--out results/physics_raw_speed]
 
 Rows: ``mj_step`` of the default humanoid holding its standing rest pose under PD (single thread,
-``HumanoidConfig()``'s set-up, which the projection uses: dt 1/360 s, implicitfast + Newton, feet in
+the set-up of P's ``plain`` preset: dt 1/360 s, implicitfast + Newton, feet in
 contact), with and without the floor contacts
 (pelvis hung 1 m up); ``mj_kinematics`` alone; ``joints_to_qpos`` / ``qpos_to_joints`` on a 196-frame
 synthetic walk (HumanML3D's longest window). Best of ``--repeats`` wall-clock runs; the machine is
-shared, so expect +-20-30 %.
+shared, so expect +-20-30 %. Writes ``<out>.md`` and ``<out>.json`` (the rows and the run's meta).
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
 import mujoco
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from physmotion.physics.humanoid import build_model  # noqa: E402
-from physmotion.physics.retarget import joints_to_qpos, qpos_to_joints  # noqa: E402
+from experiments._results import markdown_table, run_meta, write_results
+from physmotion.physics.humanoid import build_model
+from physmotion.physics.presets import preset
+from physmotion.physics.retarget import joints_to_qpos, qpos_to_joints
 
 
 def _best(fn, repeats: int) -> float:
@@ -48,13 +46,14 @@ def _walk(frames: int) -> np.ndarray:
     return forward_kinematics(rot, root, REST_OFFSETS)
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=5.0)
     ap.add_argument("--repeats", type=int, default=3)
-    args = ap.parse_args()
+    ap.add_argument("--out", default="results/physics_raw_speed", help="writes OUT.md and OUT.json")
+    args = ap.parse_args(argv)
 
-    model = build_model()
+    model = build_model(None, preset("plain").humanoid)  # P's humanoid
     steps = int(round(args.seconds / model.opt.timestep))
     rows: list[tuple[str, float, str]] = []
 
@@ -95,12 +94,13 @@ def main() -> None:
     rows.append(("joints_to_qpos (196 frames)", 196 / to_q, "frames/s"))
     rows.append(("qpos_to_joints fk (196 frames)", 196 / to_j, "frames/s"))
 
-    print(f"mujoco {mujoco.__version__}, dt {model.opt.timestep:.6f} s, {args.seconds:g} s runs,", end=" ")
-    print(f"best of {args.repeats}, single thread")
-    print(f"| {'what':42s} | {'per second':>12s} | note |")
-    print(f"|{'-' * 44}|{'-' * 14}|------|")
-    for what, rate, note in rows:
-        print(f"| {what:42s} | {rate:12,.0f} | {note} |")
+    title = (f"mujoco {mujoco.__version__}, dt {model.opt.timestep:.6f} s, {args.seconds:g} s runs, "
+             f"best of {args.repeats}, single thread")
+    table = markdown_table(("what", "per second", "note"), [(w, f"{r:,.0f}", n) for w, r, n in rows])
+    md = f"# Raw physics speed\n\n{title}\n\n{table}\n"
+    print(md)
+    meta = run_meta(__file__, argv, "plain", mujoco=mujoco.__version__, sim_dt=model.opt.timestep)
+    write_results(args.out, md, {"meta": meta, "rows": [{"what": w, "per_second": r, "note": n} for w, r, n in rows]})
 
 
 if __name__ == "__main__":

@@ -1,17 +1,18 @@
 """The physics projection on every captured clip, by category of motion, for the baseline tracker and for
 each change made for dynamic motion: writes results/projection_dynamic.md and .json.
 
-Usage: python scripts/projection_dynamic.py [--mocap ../shared/data/mocap] [--out results/projection_dynamic]
+Usage: python -m experiments.projection_dynamic [--mocap ../shared/data/mocap] [--out results/projection_dynamic]
        [--limit N]
-Rows: "tracker v0.1" (the model-based tracker as it was: no toe-off flattening, the root residual carries
-the whole root wrench, bounded at 0.3 W and held over 4 simulation steps), "+ toe-off", "+ feet balance",
-"toe-off + feet balance" (both, with the residual above), "+ ballistic flight" (that, with flight phases
-made ballistic), and "default" (``ProjectionConfig()``: all of it, the residual bounded at 0.2 W and held
-over 2 steps, the feet's fit weighting torque 0.3), and "default + ILC" (iterative learning control:
-``ProjectionConfig(ilc_passes=2)``, the option of ``physmotion project --ilc``, three simulations per clip),
-and "default at 1/720 s" (``ProjectionConfig().at_fine_step()``, the option of ``physmotion project
---fine-step``: half the simulation step, twice the steps).
-Categories from the captions (physmotion.eval.projection_quality.category). Input metrics are measured on
+Rows, each one of P's presets (physmotion/physics/presets.py; :data:`ROWS` maps a row's label to its preset):
+"tracker v0.1" (``tracker_v01``: the model-based tracker as it was: no toe-off flattening, the root
+residual carries the whole root wrench, bounded at 0.3 W and held over 4 simulation steps), "+ toe-off",
+"+ feet balance", "toe-off + feet balance" (both, with the residual above), "+ ballistic flight"
+(``plain_held_residual``: that, with flight phases made ballistic), and "default" (``plain``: all of it,
+the residual bounded at 0.2 W and held over 2 steps, the feet's fit weighting torque 0.3), and "default +
+ILC" (``ilc``: iterative learning control, the option of ``physmotion project --ilc``, three simulations
+per clip), and "default at 1/720 s" (``fine``, the option of ``physmotion project --fine-step``: half the
+simulation step, twice the steps).
+Categories from the captions (experiments.projection_quality.category). Input metrics are measured on
 the input grounded on the humanoid's surface (the metrics' floor convention), output metrics on the
 simulation; airborne: share of frames with no foot patch within 2 cm of the floor.
 """
@@ -19,38 +20,23 @@ simulation; airborne: share of frames with no foot patch within 2 cm of the floo
 from __future__ import annotations
 
 import argparse
-import json
 import time
-from dataclasses import replace
-from pathlib import Path
 
-from physmotion.eval.projection_quality import by_category, measure_clips
+from experiments._results import run_meta, write_results
+from experiments.projection_quality import by_category, category_table, measure_clips, spread
 from physmotion.io.importer import load_manifest
-from physmotion.motion import write_atomic
-from physmotion.physics.projection import ProjectionConfig
-from physmotion.physics.shaping import ShapingConfig
-from physmotion.physics.tracking import TrackingConfig
+from physmotion.physics.presets import preset
 
-
-def configs() -> dict[str, ProjectionConfig]:
-    base = ProjectionConfig()
-    # The residual before docs/decisions/projection.md "residual within 0.1 W on walks and runs": a baseline
-    # row.
-    held = replace(base, humanoid=replace(base.humanoid, residual_every=4),
-                   tracking=replace(base.tracking, residual_force=0.3, feet_torque_weight=1.0))
-    no_feet = replace(held.tracking, feet_balance=False)
-    no_ballistic = replace(base.shaping, ballistic_flight=False)
-    no_toe = replace(no_ballistic, flatten_toe_off=False)
-    return {
-        "tracker v0.1": replace(held, tracking=no_feet, shaping=no_toe),
-        "+ toe-off": replace(held, tracking=no_feet, shaping=no_ballistic),
-        "+ feet balance": replace(held, shaping=no_toe),
-        "toe-off + feet balance": replace(held, shaping=no_ballistic),
-        "+ ballistic flight": held,
-        "default": base,
-        "default + ILC": replace(base, ilc_passes=2),
-        "default at 1/720 s": ProjectionConfig().at_fine_step(),
-    }
+ROWS = {  # a row's label -> P's preset
+    "tracker v0.1": "tracker_v01",
+    "+ toe-off": "tracker_v01_toe_off",
+    "+ feet balance": "tracker_v01_feet_balance",
+    "toe-off + feet balance": "tracker_v01_toe_off_feet_balance",
+    "+ ballistic flight": "plain_held_residual",
+    "default": "plain",
+    "default + ILC": "ilc",
+    "default at 1/720 s": "fine",
+}
 
 
 ACCEPTANCE_ROWS = ("default", "default + ILC", "default at 1/720 s")  # the rows judged against TARGETS
@@ -64,28 +50,11 @@ TARGETS = {  # the issue's acceptance, per row of the default on runs and jumps
 }
 
 
-def _category_table(rows: dict[str, dict[str, float]]) -> list[str]:
-    lines = ["| category | clips | success | MPJPE mm | Penetrate in→out | Float in→out | Skate in→out | "
-             "Phys-Err in→out | airborne in→out | feet touching in→out | slide per touch in→out | "
-             "residual F mean / p95 (W) | residual τ mean / p95 (W m) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for name, r in rows.items():
-        cells = [name, str(r["clips"]), f"{100 * r['success']:.1f} %", f"{r['mpjpe_mm']:.1f}"]
-        cells += [f"{r[k + '_in']:.2f} → {r[k + '_out']:.2f}" for k in ("penetrate", "float", "skate", "phys_err")]
-        cells += [f"{100 * r['airborne_in']:.1f} → {100 * r['airborne_out']:.1f} %",
-                  f"{100 * r['contact_in']:.1f} → {100 * r['contact_out']:.1f} %",
-                  f"{r['slide_in']:.1f} → {r['slide_out']:.1f}",
-                  f"{r['residual_force_mean']:.3f} / {r['residual_force_p95']:.3f}",
-                  f"{r['residual_torque_mean']:.3f} / {r['residual_torque_p95']:.3f}"]
-        lines.append("| " + " | ".join(cells) + " |")
-    return lines
-
-
 def _markdown(results: dict[str, dict[str, dict[str, float]]], seconds: dict[str, float]) -> str:
     out = ["# Physics projection on captured motion, by category",
            "",
-           "Written by `python scripts/projection_dynamic.py`: every clip of `../shared/data/mocap`, projected "
-           "once per configuration (`ProjectionConfig`, P's plain Morph-selection mode, tau 0.5 m). Input "
+           "Written by `python -m experiments.projection_dynamic`: every clip of `../shared/data/mocap`, "
+           "projected once per preset of P (its plain Morph-selection mode, tau 0.5 m). Input "
            "metrics on the input grounded on the humanoid's surface, output metrics on the simulation, both on "
            "the clip's own humanoid; airborne: share of frames with no foot patch within 2 cm of the floor; "
            "feet touching: share of frame pairs with a foot joint in contact (5 mm) in both, slide per touch: "
@@ -94,7 +63,7 @@ def _markdown(results: dict[str, dict[str, dict[str, float]]], seconds: dict[str
            "percentile over all frames.",
            ""]
     for name, rows in results.items():
-        out += [f"## {name} ({seconds[name]:.0f} s)", "", *_category_table(rows), ""]
+        out += [f"## {name} (preset `{ROWS[name]}`, {seconds[name]:.0f} s)", "", category_table(rows), ""]
     out += ["## Acceptance on captured runs and jumps", "",
             "| target | " + " | ".join(f"{c}, {row}" for row in ACCEPTANCE_ROWS for c in ("run", "jump")) + " |",
             "|---" * (1 + 2 * len(ACCEPTANCE_ROWS)) + "|"]
@@ -122,26 +91,22 @@ def _markdown(results: dict[str, dict[str, dict[str, float]]], seconds: dict[str
     return "\n".join(out)
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--mocap", default="../shared/data/mocap")
     parser.add_argument("--out", default="results/projection_dynamic", help="writes OUT.md and OUT.json")
     parser.add_argument("--limit", type=int, default=0, help="only every k-th clip, N clips (a quick look)")
-    args = parser.parse_args()
-    clips = load_manifest(args.mocap)
-    if args.limit:
-        clips = clips[:: max(1, len(clips) // args.limit)][: args.limit]
+    args = parser.parse_args(argv)
+    clips = spread(load_manifest(args.mocap), args.limit)
     results, seconds = {}, {}
-    for name, cfg in configs().items():
+    for name, preset_name in ROWS.items():
         start = time.perf_counter()
-        results[name] = by_category(clips, measure_clips(clips, cfg))
+        results[name] = by_category(clips, measure_clips(clips, preset(preset_name)))
         seconds[name] = time.perf_counter() - start
         print(f"{name}: {seconds[name]:.0f} s", flush=True)
-    meta = {"clips": len(clips), "mocap": str(args.mocap), "seconds": seconds}
-    text = json.dumps({"meta": meta, "configs": results}, indent=2) + "\n"
-    write_atomic(Path(args.out + ".json"), lambda f: f.write(text.encode()))
+    meta = run_meta(__file__, argv, dict(ROWS), clips=len(clips), mocap=str(args.mocap), seconds=seconds)
     md = _markdown(results, seconds)
-    write_atomic(Path(args.out + ".md"), lambda f: f.write(md.encode()))
+    write_results(args.out, md, {"meta": meta, "configs": results})
     print(md)
 
 

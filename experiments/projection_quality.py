@@ -1,20 +1,35 @@
-"""The physics projection on captured clips: which clips the targets speak of (walking/running, and every
-clip by category of motion), how one clip is measured, and the per-category summary. Shared by
-``bench/projection_quality.py``, ``scripts/projection_dynamic.py`` and the tests.
+"""Physics projection on every captured clip of the bundled mocap, by category of motion: one table.
+
+Usage: python -m experiments.projection_quality [--mocap ../shared/data/mocap] [--limit N] [--walks-runs]
+       [--preset plain] [--out results/projection_quality]
+One row per category (jump, kick, dance, run, turn, walk, other; from the captions), then "walks+runs"
+(the 203 walking/running clips of earlier figures) and "all": success (no MPJPE past 0.5 m), MPJPE, the
+physical metrics of input -> simulation (both on the clip's humanoid geometry, the input grounded on it:
+the metrics' floor convention), airborne share of frames (no foot patch within 2 cm of the floor) of input
+-> simulation, and the root residual used (force x W, torque x W m; mean and 95th percentile over frames).
+P is the preset ``--preset`` (``ilc``: ``project --ilc 2``, ``fine``: ``project --fine-step``).
+
+This module also holds what measuring P on captured clips takes (which clips the targets speak of, how
+one clip is measured, the per-category summary), shared by ``experiments/projection_dynamic.py``,
+``experiments/imitator.py`` and the tests.
 """
 
 from __future__ import annotations
 
+import argparse
 import re
+import time
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 
 import numpy as np
 
+from experiments._results import markdown_table, run_meta, write_results
 from physmotion.io.importer import ClipInfo, import_clip, load_manifest
 from physmotion.metrics import physical_metrics
 from physmotion.metrics.physical import skate_factors
+from physmotion.physics.presets import preset, preset_names
 from physmotion.physics.projection import ProjectedMotion, ProjectionConfig, project
 from physmotion.physics.surface import HumanoidSurface, ground_on_surface
 from physmotion.physics.workers import map_in_workers
@@ -147,3 +162,53 @@ def by_category(clips: list[ClipInfo], measured: list[ClipProjection]) -> dict[s
         rows["walks+runs"] = summarize(locomotion)
     rows["all"] = summarize(measured)
     return rows
+
+
+def category_table(rows: dict[str, dict[str, float]]) -> str:
+    """:func:`by_category`'s rows as one Markdown table."""
+    header = ("category", "clips", "success", "MPJPE mm", "Penetrate in→out", "Float in→out", "Skate in→out",
+              "Phys-Err in→out", "airborne in→out", "feet touching in→out", "slide per touch in→out",
+              "residual F mean / p95 (W)", "residual τ mean / p95 (W m)")  # fmt: skip
+    lines = []
+    for name, r in rows.items():
+        cells = [name, str(r["clips"]), f"{100 * r['success']:.1f} %", f"{r['mpjpe_mm']:.1f}"]
+        cells += [f"{r[k + '_in']:.2f} → {r[k + '_out']:.2f}" for k in SUMMARY_METRICS]
+        cells += [f"{100 * r['airborne_in']:.1f} → {100 * r['airborne_out']:.1f} %",
+                  f"{100 * r['contact_in']:.1f} → {100 * r['contact_out']:.1f} %",
+                  f"{r['slide_in']:.1f} → {r['slide_out']:.1f}",
+                  f"{r['residual_force_mean']:.3f} / {r['residual_force_p95']:.3f}",
+                  f"{r['residual_torque_mean']:.3f} / {r['residual_torque_p95']:.3f}"]  # fmt: skip
+        lines.append(cells)
+    return markdown_table(header, lines)
+
+
+def spread(clips: list[ClipInfo], limit: int) -> list[ClipInfo]:
+    """``limit`` clips spread evenly over ``clips`` (every k-th); all of them for 0."""
+    return clips[:: max(1, len(clips) // limit)][:limit] if limit else clips
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--mocap", default="../shared/data/mocap")
+    parser.add_argument("--limit", type=int, default=0, help="only the first N clips")
+    parser.add_argument("--walks-runs", action="store_true", help="only the walking/running clips")
+    parser.add_argument("--preset", default="plain", choices=preset_names(), help="P's preset")
+    parser.add_argument("--out", default="results/projection_quality", help="writes OUT.md and OUT.json")
+    args = parser.parse_args(argv)
+    clips = locomotion_clips(args.mocap) if args.walks_runs else load_manifest(args.mocap)
+    clips = clips[: args.limit] if args.limit else clips
+    start = time.perf_counter()
+    measured = measure_clips(clips, preset(args.preset))  # one worker process per core
+    seconds = time.perf_counter() - start
+    rows = by_category(clips, measured)
+    failed = [c.clip for c, m in zip(clips, measured) if not m.result.success]
+    md = (f"# P on {len(clips)} captured clips by category (preset {args.preset}, {seconds:.0f} s)\n\n"
+          f"{category_table(rows)}\n\nfailed: {', '.join(failed) or '-'}\n")
+    print(md)
+    meta = run_meta(__file__, argv, args.preset, clips=len(clips), mocap=str(args.mocap), seconds=seconds)
+    write_results(args.out, md, {"meta": meta, "rows": rows, "failed": failed})
+
+
+if __name__ == "__main__":
+    main()

@@ -84,11 +84,11 @@ def test_standing_actions_stay_in_place(stats) -> None:
 
 @pytest.mark.slow
 def test_physics_modes_match_the_recorded_bench(model: MotionDiffusion) -> None:
-    """32 prompts, 6 s, seed 0, every mode of bench/physdiff_quality.py, against seed 0 of
+    """32 prompts, 6 s, seed 0, every mode of experiments/physdiff_quality.py, against seed 0 of
     results/physdiff_quality.json, whose three-seed means the README and the model card quote
     (tests/test_results.py). Generation is deterministic; the margin allows another CPU's rounding in
     the simulation. PhysDiff must beat the grounded baseline and post-processing, not only ``none``."""
-    from physmotion.eval.physics_modes import compare_modes
+    from experiments.physdiff_quality import compare_modes
     from physmotion.eval.prompts import PHYSICS_PROMPTS
 
     recorded = json.loads((Path(__file__).parents[1] / "results" / "physdiff_quality.json").read_text())

@@ -194,9 +194,9 @@ def test_a_329d_model_projects_in_its_own_features(imported_clips) -> None:
 def test_morph_mode_is_one_projection_with_imitation_selection(tiny_model) -> None:
     """morph: plain sampling, App. A's pre-processing, then one P that keeps the (pre-processed) sampled
     motion where the imitation fails (Morph Sec. 3.3 "Inference"); failures are counted apart from resets."""
-    from physmotion.eval.physics_modes import imitation_columns
+    from physmotion.eval.physics_columns import imitation_columns
     from physmotion.morph.preprocess import PreprocessConfig, floor_first_frame, preprocess
-    from physmotion.physics_mode import PhysicsMode, parse_modes
+    from physmotion.pipelines.modes import PhysicsMode, parse_modes
 
     mode = PhysicsMode.parse("morph")
     assert str(mode) == "morph" and mode.projects and mode.projections == 1 and mode.hook_steps(50) == []

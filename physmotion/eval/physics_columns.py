@@ -1,20 +1,14 @@
-"""Generation modes side by side (``none``, ``none+floor``, ``post:K``, ``physdiff:<schedule>``, ``morph``: see
-:mod:`physmotion.physics_mode`), with physical metrics."""
+"""The physics columns of the evaluation tables: what P's falls did (resets), Morph's imitation failures,
+and the body surface the physical metrics are measured on."""
 
 from __future__ import annotations
 
-import time
 from collections.abc import Sequence
-from dataclasses import replace
 
 import numpy as np
 
-from physmotion.conventions import FPS
-from physmotion.diffusion.model import MotionDiffusion
 from physmotion.errors import PhysmotionError
-from physmotion.generate import GenerateConfig, GenerateResult, generate
-from physmotion.metrics import physical_metrics
-from physmotion.physics_mode import PhysicsMode
+from physmotion.generate import GenerateResult
 
 
 def reset_columns(results: Sequence[GenerateResult]) -> dict[str, float]:
@@ -45,36 +39,3 @@ def metric_surface(name: str, bodies: Sequence[np.ndarray | None] | None = None)
     if name == "joints":
         return None
     raise PhysmotionError(f"unknown surface {name!r}: humanoid or joints")
-
-
-def compare_modes(
-    model: MotionDiffusion,
-    prompts: Sequence[str],
-    modes: Sequence[str | PhysicsMode],
-    base: GenerateConfig | None = None,
-    surface: str = "humanoid",
-) -> dict[str, dict[str, float]]:
-    """Generate one motion per prompt in each mode; mode spelling -> physical metrics (mean over
-    motions) plus ``seconds_per_motion``, ``tracked`` (fraction of all projections, PhysDiff's four per
-    motion included, in which the humanoid never fell), :func:`reset_columns` and
-    :func:`imitation_columns`.
-
-    surface "humanoid": the humanoid's geometry, with the body P simulated for projected outputs and one
-    estimated from the joints otherwise; "joints": the joint-only surface model."""
-    base = base or GenerateConfig()
-    metric_surface(surface)  # a bad name fails before any work
-    results: dict[str, dict[str, float]] = {}
-    for mode in [PhysicsMode.parse(m) for m in modes]:
-        cfg = replace(base, physics=mode)
-        start = time.perf_counter()
-        out = generate(list(prompts), cfg, model)
-        seconds = time.perf_counter() - start
-        joints = np.stack([m.joints for m in out.motions])
-        row = physical_metrics(joints, FPS, body=metric_surface(surface, out.bodies))
-        row["seconds_per_motion"] = seconds / len(prompts)
-        log = out.projections
-        row["tracked"] = float(np.mean(log.tracked)) if log.tracked else float("nan")
-        row.update(reset_columns([out]))
-        row.update(imitation_columns([out]))
-        results[str(mode)] = row
-    return results

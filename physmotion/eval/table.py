@@ -41,7 +41,7 @@ from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.physdiff import joints_to_features, on_data_floor, projection_settings
 from physmotion.errors import PhysmotionError
 from physmotion.eval.evaluator import Evaluator
-from physmotion.eval.physics_modes import imitation_columns, metric_surface, reset_columns
+from physmotion.eval.physics_columns import imitation_columns, metric_surface, reset_columns
 from physmotion.features.humanml3d import recover_from_ric
 from physmotion.generate import GenerateConfig, generate
 from physmotion.metrics import physical_metrics
@@ -54,7 +54,7 @@ from physmotion.metrics.generation import (
 )
 from physmotion.motion import write_atomic
 from physmotion.physics.surface import ground_on_surface
-from physmotion.physics_mode import PhysicsMode
+from physmotion.pipelines.modes import PhysicsMode
 
 REAL = "real"
 GENERATION_COLUMNS = ("R@1", "R@2", "R@3", "FID", "MM-Dist", "Diversity", "MModality", "sec/motion")

@@ -1,16 +1,20 @@
-"""Captured clips by category of motion, airborne shares and the per-category summary
-(physmotion/eval/projection_quality.py, scripts/projection_dynamic.py)."""
+"""Captured clips by category of motion, airborne shares and the per-category summary, and the two
+experiments that write them (experiments/projection_quality.py, experiments/projection_dynamic.py)."""
 
 from __future__ import annotations
+
+import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from physmotion.eval.projection_quality import (
+from experiments.projection_quality import (
     AIRBORNE_HEIGHT,
     airborne_share,
     by_category,
     category,
+    main,
     measure_clips,
 )
 from physmotion.io.importer import load_manifest
@@ -61,3 +65,24 @@ def test_by_category_summarises_measured_clips(mocap_dir) -> None:
         assert row["residual_force_p95"] >= row["residual_force_mean"] >= 0.0
         assert 0.0 <= row["airborne_out"] <= 1.0
         assert 0.0 <= row["contact_out"] <= 1.0 and row["slide_out"] >= 0.0
+
+
+def test_the_experiment_writes_its_table_and_meta(mocap_dir, tmp_path: Path) -> None:
+    """Two walking clips under the ``fine`` preset: <out>.md and <out>.json, the JSON's meta naming the preset,
+    the commit, the CPU, the date and the command."""
+    out = tmp_path / "pq"
+    main(["--mocap", str(mocap_dir), "--walks-runs", "--limit", "2", "--preset", "fine", "--out", str(out)])
+    data = json.loads(out.with_suffix(".json").read_text())
+    meta = data["meta"]
+    assert meta["preset"] == "fine" and meta["clips"] == 2
+    assert meta["command"].startswith("python -m experiments.projection_quality --mocap")
+    assert meta["commit"] and meta["cpu"] and meta["date"].endswith("+00:00")
+    assert data["rows"]["all"]["clips"] == 2
+    assert "| walks+runs | 2 |" in out.with_suffix(".md").read_text()
+
+
+def test_projection_dynamic_rows_are_presets() -> None:
+    from experiments.projection_dynamic import ROWS
+    from physmotion.physics.presets import preset_names
+
+    assert set(ROWS.values()) <= set(preset_names()) and ROWS["default"] == "plain"

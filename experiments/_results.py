@@ -1,0 +1,79 @@
+"""What every experiment writes: ``results/<name>.md`` (the table) and ``results/<name>.json`` (the
+figures), the JSON with a ``meta`` block saying what made it: P's preset(s) by name
+(:mod:`physmotion.physics.presets`), the commit, the CPU, the date and the command line."""
+
+from __future__ import annotations
+
+import json
+import math
+import platform
+import shlex
+import subprocess
+import sys
+from collections.abc import Sequence
+from datetime import datetime, timezone
+from pathlib import Path
+
+from physmotion.motion import write_atomic
+
+ROOT = Path(__file__).resolve().parents[1]
+Presets = str | dict[str, str] | None  # one preset, a preset per role or row, or None where P does not run
+
+
+def git_commit() -> str:
+    """``git rev-parse --short HEAD`` of the repository, with "+dirty" where tracked files differ from it."""
+
+    def git(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True, check=False)
+
+    head = git("rev-parse", "--short", "HEAD").stdout.strip() or "unknown"
+    return head + ("+dirty" if git("diff", "--quiet", "HEAD").returncode else "")
+
+
+def cpu_model() -> str:
+    """The CPU's model name (``/proc/cpuinfo``), else what :func:`platform.processor` says."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
+
+
+def run_meta(script: str, argv: Sequence[str] | None, preset: Presets, **extra) -> dict:
+    """The meta block of a run of the experiment ``script`` (its ``__file__``) with arguments ``argv``
+    (None: this process's); ``extra`` (the experiment's own settings) follows the common keys."""
+    args = sys.argv[1:] if argv is None else argv
+    command = shlex.join(["python", "-m", f"experiments.{Path(script).stem}", *args])
+    return {"preset": preset, "commit": git_commit(), "cpu": cpu_model(),
+            "date": datetime.now(timezone.utc).isoformat(timespec="seconds"), "command": command, **extra}  # fmt: skip
+
+
+def write_results(stem: str | Path, markdown: str, payload: dict) -> list[Path]:
+    """Write ``<stem>.md`` and ``<stem>.json`` (``payload``: strict JSON, NaN written as null) atomically;
+    returns their paths."""
+    stem = Path(stem)
+    md, js = stem.with_name(stem.name + ".md"), stem.with_name(stem.name + ".json")
+    text = json.dumps(_finite(payload), indent=2, allow_nan=False) + "\n"
+    write_atomic(md, lambda f: f.write(markdown if markdown.endswith("\n") else markdown + "\n"), "w")
+    write_atomic(js, lambda f: f.write(text), "w")
+    return [md, js]
+
+
+def markdown_table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
+    """A Markdown table: one header row, then one row per entry of ``rows`` (cells as ``str`` gives them)."""
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def _finite(value):
+    """``value`` with every NaN or infinite float (nested in dicts, lists and tuples) replaced by None."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value

@@ -1,0 +1,27 @@
+"""experiments/physdiff_quality.py runs end to end in its own process and writes what it promises."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.mark.slow
+def test_physdiff_quality_writes_its_json(tmp_path: Path) -> None:
+    # One prompt, one seed, every mode; --tau reaches the projection and the record.
+    out = tmp_path / "pq"
+    res = subprocess.run([sys.executable, "-m", "experiments.physdiff_quality", "--prompts", "1",
+                          "--seeds", "0", "--tau", "0.25", "--out", str(out)],
+                         cwd=ROOT, capture_output=True, text=True, timeout=600, check=False)  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    assert "reset at 0.25 m" in res.stdout and "reset at 0.25 m" in out.with_suffix(".md").read_text()
+    data = json.loads(out.with_suffix(".json").read_text())
+    assert data["meta"]["prompts"] == 1 and data["meta"]["tau"] == 0.25 and data["meta"]["seeds"] == [0]
+    assert data["meta"]["preset"] == {"physdiff, post": "sampling", "morph": "plain"}
+    (run,) = data["runs"]
+    assert set(run) == {"none", "none+floor", "post:1", "post:4", "physdiff:end:4,space:1"}
+    assert run["physdiff:end:4,space:1"]["phys_err"] < run["none"]["phys_err"]
