@@ -1,6 +1,8 @@
 """PhysDiff's Fig. 4 on our data: the number of projection steps against FID, R-Precision and Phys-Err.
 
-As in the paper (section 5.3, "Number of Projection Steps"), the projection steps are removed from the
+    python -m experiments.schedule_study --data data_build/mocap [--motions 32] [--out results/schedule_study]
+
+writes <out>.md, <out>.json (with the run's meta block) and <out>.png. As in the paper (section 5.3, "Number of Projection Steps"), the projection steps are removed from the
 earliest timesteps first and kept consecutive at the end: N projections is the schedule
 ``end:N,space:1`` of the 50 DDIM steps, and N = 0 is plain sampling. Each point is one row of
 :func:`~physmotion.eval.table.evaluate`, so the numbers match ``physmotion evaluate`` exactly.
@@ -8,10 +10,13 @@ earliest timesteps first and kept consecutive at the end: N projections is the s
 
 from __future__ import annotations
 
+import argparse
+import sys
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 
+from experiments._results import run_meta
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.errors import PhysmotionError
 from physmotion.eval.evaluator import Evaluator
@@ -81,3 +86,40 @@ def write_study(table: EvalTable, stem: str | Path) -> list[Path]:
     paths = table.write(stem)
     paths.append(plot_study(table, Path(stem).with_suffix(".png")))
     return paths
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", required=True, help="HumanML3D-layout folder")
+    parser.add_argument("--out", default="results/schedule_study", help="output stem")
+    parser.add_argument("--model", default=None, help="model folder (default: the shipped model)")
+    parser.add_argument("--evaluator", default=None, help="evaluator folder (default: the shipped one)")
+    parser.add_argument("--split", default="test")
+    parser.add_argument("--counts", default=",".join(map(str, DEFAULT_COUNTS)), help="projection counts")
+    parser.add_argument("--motions", type=int, default=None, help="a seeded subset of the split")
+    parser.add_argument("--repeats", type=int, default=1)
+    parser.add_argument("--steps", type=int, default=50, help="DDIM steps")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--plot-only", action="store_true", help="redraw <out>.png from <out>.json")
+    args = parser.parse_args(argv)
+    try:
+        if args.plot_only:
+            print("wrote", plot_study(EvalTable.from_json(f"{args.out}.json"), f"{args.out}.png"))
+            return 0
+        counts = [int(c) for c in args.counts.split(",")]
+        cfg = EvaluateConfig(split=args.split, repeats=args.repeats, max_motions=args.motions, seed=args.seed)
+        cfg.base.sampler.steps = args.steps
+        table = schedule_study(MotionDiffusion.load(args.model), Evaluator.load(args.evaluator), args.data,
+                               counts, cfg)  # fmt: skip
+        table.meta.update(run_meta(__file__, argv, "sampling"))  # EvaluateConfig's base: generation's P
+        paths = write_study(table, args.out)
+    except (PhysmotionError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    print(table.to_markdown())
+    print("wrote " + ", ".join(map(str, paths)))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

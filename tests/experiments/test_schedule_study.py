@@ -1,11 +1,14 @@
 """The projection-schedule study (PhysDiff Fig. 4) end to end on a tiny model: rows, files, the plot."""
 
+import shutil
+from pathlib import Path
+
 import pytest
 from PIL import Image
 
+from experiments.schedule_study import main, mode_for, schedule_study, write_study
 from physmotion.diffusion.samplers import SamplerConfig
 from physmotion.errors import PhysmotionError
-from physmotion.eval.schedule_study import mode_for, schedule_study, write_study
 from physmotion.eval.table import EvaluateConfig
 from physmotion.generate import GenerateConfig
 
@@ -30,3 +33,11 @@ def test_counts_outside_the_sampling_steps_are_refused(tiny_model, tiny_evaluato
     cfg = EvaluateConfig(repeats=1, base=GenerateConfig(sampler=SamplerConfig(steps=4)))
     with pytest.raises(PhysmotionError, match="0..4"):
         schedule_study(tiny_model, tiny_evaluator, built_dir, [0, 5], cfg)
+
+
+def test_plot_only_redraws_the_committed_study(tmp_path: Path) -> None:
+    """The driver's --plot-only redraws <out>.png from the committed results/schedule_study.json."""
+    shutil.copy(Path(__file__).parents[2] / "results" / "schedule_study.json", tmp_path / "study.json")
+    assert main(["--data", "unused", "--out", str(tmp_path / "study"), "--plot-only"]) == 0
+    with Image.open(tmp_path / "study.png") as img:
+        assert img.format == "PNG" and img.size[0] > 400
