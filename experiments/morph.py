@@ -1,6 +1,6 @@
 """Morph's Tables 1/2 on our data: the base model and each fine-tuned round, each in several physics modes.
 
-    python scripts/morph_table.py --data data_build/mocap --run runs/morph -o results/morph
+    python -m experiments.morph --data data_build/mocap --run runs/morph -o results/morph
 
 runs `physmotion evaluate` on the base model and on every ``<run>/round_<k>/model`` that `physmotion morph
 run` wrote, on the same split, captions, lengths and seeds, and writes one table (<out>.md, <out>.json):
@@ -12,7 +12,8 @@ since (the shipped default after a new release) is refused: pass the run's base 
 With ``--control DIR`` (repeatable) a model fine-tuned by `morph finetune --mix 0` (the same fine-tune
 on the real train split alone) adds rows "control <steps> steps none" and "... none+floor": what the
 synthetic items add beyond continued training on the re-floored real motions.
-It is a script rather than a command because it is a study over several models.
+It is a script rather than a command because it is a study over several models. P: the ``sampling``
+preset in post:1 and PhysDiff, ``plain`` in morph (the table's meta records both).
 """
 
 from __future__ import annotations
@@ -22,13 +23,14 @@ import json
 import sys
 from pathlib import Path
 
+from experiments._results import run_meta
 from physmotion.checkpoint import weights_sha256
 from physmotion.diffusion.model import DEFAULT_MODEL_DIR, MotionDiffusion
 from physmotion.errors import PhysmotionError
 from physmotion.eval.evaluator import Evaluator
 from physmotion.eval.table import REAL, EvalTable, EvaluateConfig, evaluate
 from physmotion.morph.loop import read_rounds
-from physmotion.physics_mode import parse_modes
+from physmotion.pipelines.modes import parse_modes
 
 # post:1 is one P with the sampling preset's reset instead of Morph's selection: the cheapest projection
 # after sampling, and what one P can do for a tuned model (docs/decisions/morph.md "one P on the Morph
@@ -122,6 +124,7 @@ def main(argv: list[str] | None = None) -> int:
         parts = Path(f"{args.out}.parts")
         table = morph_table(args.data, args.run, args.base, cfg, Evaluator.load(args.evaluator), parts,
                             args.control)
+        table.meta.update(run_meta(__file__, argv, {"post, physdiff": "sampling", "morph": "plain"}))
         paths = table.write(args.out)
     except PhysmotionError as exc:
         print(f"error: {exc}", file=sys.stderr)

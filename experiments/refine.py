@@ -1,6 +1,6 @@
 """BioMoDiffuse's Table 5 as we can measure it: inversion refinement of jittery motion.
 
-    python scripts/refine_table.py --data data_build/mocap -o results/refine [--limit N] [--model DIR]
+    python -m experiments.refine --data data_build/mocap -o results/refine [--limit N] [--model DIR]
 
 Test-split clips (``new_joints`` of the ids in test.txt, mirrored "M" copies left out) get the jitter a
 pose estimator makes: per-joint Gaussian noise of sigma 1, 2 and 4 cm and 5 % of the frames replaced by
@@ -20,20 +20,18 @@ Writes <out>.md and <out>.json atomically and prints the table.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from experiments._results import run_meta, write_results
 from physmotion.conventions import FPS
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.refine import RefineConfig, low_pass, refine
 from physmotion.diffusion.samplers import default_sampler
-from physmotion.eval.table import table_paths
 from physmotion.metrics import physical_metrics
-from physmotion.motion import write_atomic
 from physmotion.physics.surface import HumanoidSurface, ground_on_surface
 
 SIGMAS_CM = (1.0, 2.0, 4.0)
@@ -128,7 +126,7 @@ def to_markdown(table: list[dict], meta: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=Path("data_build/mocap"))
     parser.add_argument("-o", "--out", type=Path, default=Path("results/refine"))
@@ -138,16 +136,13 @@ def main() -> None:
     parser.add_argument("--strengths", default=",".join(f"{s:g}" for s in STRENGTHS),
                         help="comma-separated refine strengths (default: %(default)s)")
     parser.add_argument("--device", default="cpu", help="where the model runs: cpu or cuda")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     strengths = tuple(float(s) for s in args.strengths.split(","))
     t0 = time.time()
     table, meta = run_table(args.data, args.limit, args.seed, args.model, strengths, args.device)
     meta["seconds"] = round(time.time() - t0, 1)
     md = to_markdown(table, meta)
-    js = json.dumps({"meta": meta, "rows": table}, indent=2) + "\n"
-    md_path, js_path = table_paths(args.out)
-    write_atomic(md_path, lambda f: f.write(md.encode()))
-    write_atomic(js_path, lambda f: f.write(js.encode()))
+    write_results(args.out, md, {"meta": run_meta(__file__, argv, None) | meta, "rows": table})  # no P here
     print(md)
 
 
