@@ -3,9 +3,12 @@
 import json
 from pathlib import Path
 
+import pytest
+
 from experiments.refine import SIGMAS_CM, main
 
 
+@pytest.mark.slow  # a real table run: 16 variants of the clip, 6 of them refined (about a minute)
 def test_refine_table_writes_every_row_and_its_meta(small_built_dir: Path, tiny_model_dir: Path,
                                                      tmp_path: Path) -> None:  # fmt: skip
     out = tmp_path / "refine"

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
+from experiments.biomodiffuse import ROWS, RUNS, evaluate_row, markdown_table, separated, wins
 from physmotion.diffusion.samplers import BIOMO_SAMPLER
-from physmotion.eval.ablation import ROWS, RUNS, evaluate_row, markdown_table, separated, wins
 
 
 def test_rows_are_the_papers_and_guidance_samples_the_dropout_model():
