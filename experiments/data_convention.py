@@ -1,6 +1,7 @@
 """Physical metrics of motions as HumanML3D features hold them, and after grounding them on the humanoid.
 
-    python scripts/data_convention.py --data data_build/mocap [--synth runs/morph/round_1/synth ...]
+    python -m experiments.data_convention --data data_build/mocap [--synth runs/morph/round_1/synth ...]
+        [--out results/data_convention]
 
 HumanML3D's features put each clip's lowest joint at y = 0, which leaves the humanoid's soles under the
 floor. `--physics none` is measured in that convention, the real rows of our tables grounded
@@ -8,6 +9,7 @@ floor. `--physics none` is measured in that convention, the real rows of our tab
 folder of `physmotion morph synth`, for the motions Morph's imitation selection keeps (refined ones, and
 the generated inputs they came from): what fine-tuning on them can teach plain sampling
 (docs/decisions/morph.md, "what fine-tuning can do for --physics none"). Millimetres, humanoid surface.
+Writes ``<out>.md`` and ``<out>.json``; no projection (the meta's preset is null).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments._results import markdown_table, run_meta, write_results
 from physmotion.conventions import FPS
 from physmotion.features.humanml3d import recover_from_ric
 from physmotion.metrics.physical import physical_metrics
@@ -42,11 +45,12 @@ def measure(features: list[np.ndarray]) -> dict[str, float]:
     return {k: float(np.mean([r[k] for r in rows])) for k in rows[0]} | {"n": len(rows)}
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=Path("data_build/mocap"))
     parser.add_argument("--synth", type=Path, nargs="*", default=[])
-    args = parser.parse_args()
+    parser.add_argument("--out", default="results/data_convention", help="writes OUT.md and OUT.json")
+    args = parser.parse_args(argv)
     sets: dict[str, list[np.ndarray]] = {}
     for split in ("test", "train"):
         ids = (args.data / f"{split}.txt").read_text().split()
@@ -56,13 +60,15 @@ def main() -> None:
         sets[f"{synth}: refined, kept"] = [np.load(it.features_path) for it in kept]
         inputs = [synth / "input_joint_vecs" / f"{it.id}.npy" for it in kept]
         sets[f"{synth}: their generated inputs"] = [np.load(path) for path in inputs]
-    print("| motions | n | Penetrate | Float | Skate | Phys-Err | Phys-Err grounded |")
-    print("|---|---|---|---|---|---|---|")
+    measured = {}
     for name, feats in sets.items():
-        m = measure(feats)
-        cells = [f"{m[k]:.1f}" for k in (*COLUMNS, "phys_err_grounded")]
-        print(f"| {name} | {m['n']} | " + " | ".join(cells) + " |", flush=True)
-
+        measured[name] = measure(feats)
+        print(f"{name}: {measured[name]}", flush=True)
+    header = ("motions", "n", "Penetrate", "Float", "Skate", "Phys-Err", "Phys-Err grounded")
+    rows = [(name, m["n"], *(f"{m[k]:.1f}" for k in (*COLUMNS, "phys_err_grounded"))) for name, m in measured.items()]
+    md = "# Physical metrics in the data convention and grounded (mm)\n\n" + markdown_table(header, rows) + "\n"
+    print(md)
+    write_results(args.out, md, {"meta": run_meta(__file__, argv, None, data=str(args.data)), "sets": measured})
 
 if __name__ == "__main__":
     main()

@@ -1,6 +1,8 @@
 """Write a model folder's vocabulary.txt: the words of the captions it was trained on.
 
-    python scripts/model_vocabulary.py --data data_build/mocap --max-frames 120 \
+A tool rather than an experiment: it writes into the model folder, not into results/.
+
+    python -m experiments.model_vocabulary --data data_build/mocap --max-frames 120 \
         --model physmotion/weights/default
 
 `physmotion generate` warns about prompt words outside this file (physmotion/text/vocabulary.py).
@@ -39,7 +41,7 @@ def main(argv: list[str] | None = None) -> int:
         out = Path(args.model) / VOCABULARY_FILE
         header = (f"Words of the {args.split} captions this model was trained on ({motions} motions of "
                   f"{Path(args.data).name}, under {args.max_frames + 4} frames).\n"
-                  "Written by scripts/model_vocabulary.py; read by physmotion generate.")
+                  "Written by experiments/model_vocabulary.py; read by physmotion generate.")
         write_vocabulary(out, counts, header)
     except PhysmotionError as exc:
         print(f"error: {exc}", file=sys.stderr)
