@@ -845,6 +845,34 @@ def view_cmd(
                   "open it in a browser", highlight=False)  # fmt: skip
 
 
+@app.command("serve")
+def serve_cmd(
+    host: str = typer.Option("127.0.0.1", help="Address to listen on; only this machine reaches 127.0.0.1."),
+    port: int = typer.Option(8000, help="Port to listen on (0: any free port; the address is printed)."),
+    model: Path | None = typer.Option(None, help="Model folder, or a shipped model's name (default, morph); "
+                                      "the shipped default model if left out."),
+    physics: str = typer.Option("physdiff", help="The page's and the JSON endpoint's default physics mode "
+                                "(any of generate's; a request may name another)."),
+    waiting: int = typer.Option(4, help="Requests that may wait behind the one being generated; past that the "
+                                "server answers 503 (busy) at once."),
+) -> None:
+    """A local web app that keeps the model warm: type a prompt, watch the motion, download it; and a JSON
+    endpoint for scripts (POST /api/generate)."""
+    try:
+        from physmotion.serve import ServeConfig, bind, check_physics, make_app, serve, url_of
+    except ImportError as exc:
+        raise PhysmotionError(f"physmotion serve needs the 'serve' extra ({exc.name} is missing): "
+                              "pip install 'physmotion[serve]'") from None
+    check_physics(physics)
+    sock = bind(host, port)
+    app_ = make_app(_model_dir(model), ServeConfig(physics=physics, waiting=waiting),
+                    log=lambda line: console.print(line, highlight=False))
+    if host not in ("127.0.0.1", "localhost", "::1"):
+        _warn(f"listening on {host}: other machines can reach this server")
+    console.print(f"serving on {url_of(sock)} (Ctrl-C stops)", highlight=False)
+    serve(app_, sock)
+
+
 # morph commands
 morph_app = typer.Typer(help="Morph: synthetic motions refined by physics, selected, and fine-tuned on.",
                         no_args_is_help=True, context_settings=HELP)  # fmt: skip

@@ -1,0 +1,374 @@
+"""``physmotion serve``: a local web app and JSON endpoint that keep one model warm.
+
+:func:`make_app` builds the app (FastAPI; testable in-process), :func:`serve` runs it under uvicorn. The
+model is loaded once; every motion is made by :func:`physmotion.generate.generate` in one worker
+thread, one request at a time. At most ``ServeConfig.waiting`` requests wait behind the running one;
+past that a request is refused at once with 503 and a ``Retry-After``, so a burst never piles up work
+and every request gets an answer. Bad input gets a 4xx answer with ``{"error": "<one line>"}``.
+
+Routes:
+
+- ``GET /``: the page (prompt, physics mode, seconds, seed; the motion plays in the viewer of
+  ``physmotion view``, in an iframe; downloads). Only local assets: the vendored three.js is inlined.
+- ``POST /api/generate``: ``{"text": str, "physics": str, "seconds": float | null, "seed": int}`` ->
+  ``{"id", "text", "physics", "seconds", "seed", "fps", "frames", "joints": (T, 22, 3) list in metres,
+  "licence_tag", "resets", "length_source", "queued_s", "generate_s", "files": {"npz", "bvh", "view"}}``.
+  ``seconds`` null: the length is predicted from the text. The same request gives the same joints as
+  ``physmotion generate`` with the same options and model.
+- ``GET /api/motions/{id}.npz`` and ``.bvh``: the motion's files; ``GET /motions/{id}``: its viewer page.
+  The last ``ServeConfig.keep`` motions are kept.
+- ``GET /api/health``: ``{"status": "ok", "model", "busy", "waiting"}``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import re
+import socket
+import tempfile
+import threading
+import time
+from collections import OrderedDict
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import asynccontextmanager
+from dataclasses import dataclass, field, replace
+from importlib import resources
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+from fastapi import FastAPI
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import HTMLResponse, JSONResponse, Response
+from pydantic import BaseModel, ConfigDict, Field
+from starlette.exceptions import HTTPException
+
+from physmotion.conventions import FPS, MIN_FRAMES
+from physmotion.errors import PhysmotionError
+from physmotion.motion import Motion
+
+# The physics modes the page offers (any spelling of physmotion/physics_mode.py is accepted by the API).
+PAGE_MODES = ("none", "none+floor", "post:1", "physdiff", "morph")
+_WARMUP_TEXT = "a person walks forward"
+# /assets/NAME -> the file of physmotion/viewer/ that the served viewer pages link instead of inlining
+_ASSETS = {"three-bundle.min.js": "vendor/three-bundle.min.js", "viewer.js": "viewer.js"}
+
+
+@dataclass
+class ServeConfig:
+    """Options of a served app. ``physics`` and ``seconds`` are the defaults of a request (and the page's
+    first choice); ``waiting``: requests that may wait behind the running one before 503; ``keep``: motions
+    kept for download; ``max_projections``: a request whose physics mode runs P more often is refused
+    (``post:50`` would hold the worker for minutes); ``warmup``: make one short motion at startup."""
+
+    physics: str = "physdiff"  # generate's default: a served motion is `physmotion generate`'s
+    seconds: float | None = 6.0
+    waiting: int = 4
+    keep: int = 32
+    max_text: int = 500
+    max_projections: int = 8
+    warmup: bool = True
+
+
+class GenerateRequest(BaseModel):
+    """The JSON body of POST /api/generate; physics and seconds left out take ServeConfig's (seconds
+    null: predicted from the text)."""
+
+    model_config = ConfigDict(extra="forbid")
+    text: str
+    physics: str | None = None
+    seconds: Annotated[float, Field(allow_inf_nan=False)] | None = None
+    seed: int = Field(default=0, ge=0, le=2**32 - 1)
+
+
+@dataclass
+class _Served:
+    """One generated motion and the request that made it."""
+
+    motion: Motion
+    request: dict[str, Any]
+    length_source: str
+    queued_s: float
+    generate_s: float
+
+
+@dataclass
+class _Worker:
+    """One thread runs the model; ``limit`` requests at most are running or waiting (the rest: 503)."""
+
+    limit: int
+    executor: ThreadPoolExecutor = field(
+        default_factory=lambda: ThreadPoolExecutor(max_workers=1, thread_name_prefix="physmotion-serve"))
+    pending: int = 0
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def submit(self, fn: Callable[[], Any]) -> Future | None:
+        """``fn`` queued for the worker thread, or None where ``limit`` requests are already in."""
+        with self.lock:
+            if self.pending >= self.limit:
+                return None
+            self.pending += 1
+        future = self.executor.submit(fn)
+        future.add_done_callback(lambda _: self._release())
+        return future
+
+    def _release(self) -> None:
+        with self.lock:
+            self.pending -= 1
+
+
+def _error(status: int, message: str, headers: dict[str, str] | None = None) -> JSONResponse:
+    """A JSON error answer: ``{"error": message}`` on one line."""
+    return JSONResponse({"error": " ".join(message.split())}, status_code=status, headers=headers)
+
+
+def _validation_message(errors: list[dict]) -> str:
+    """One line for pydantic's errors of a request body: the first error, where and what."""
+    first = errors[0] if errors else {}
+    if first.get("type") == "json_invalid":
+        return f"the body is not valid JSON ({first.get('ctx', {}).get('error', 'decode error')})"
+    loc = [str(p) for p in first.get("loc", ()) if p != "body"]
+    where = ".".join(loc) or "body"
+    if first.get("type") == "missing":
+        what = f"{where} is missing" if loc else "no JSON body"
+        return f"{what}: send JSON such as {{\"text\": \"a person walks forward\"}}"
+    return f"{where}: {first.get('msg', 'invalid')}"
+
+
+def make_app(model: Any = None, config: ServeConfig | None = None,
+             log: Callable[[str], None] | None = None):  # fmt: skip
+    """The served app (a FastAPI instance) around one warm model.
+
+    model: a loaded ``MotionDiffusion``, a model folder, or None (the shipped default model). log: called with one line per generated motion and at startup (None: silent).
+    """
+    from physmotion.diffusion.model import MotionDiffusion
+    from physmotion.diffusion.samplers import default_sampler
+    from physmotion.generate import GenerateConfig, generate
+
+    cfg = config or ServeConfig()
+    say = log or (lambda _: None)
+    started = time.perf_counter()
+    net = model if isinstance(model, MotionDiffusion) else MotionDiffusion.load(model)
+    name = "default" if model is None else str(model) if isinstance(model, (str, Path)) else "in-process"
+    sampler = default_sampler(net)
+    lo, hi = MIN_FRAMES / FPS, net.denoiser.max_frames / FPS
+    worker = _Worker(limit=1 + max(cfg.waiting, 0))
+    motions: OrderedDict[str, _Served] = OrderedDict()
+    ids = itertools.count(1)
+
+    def check(req: GenerateRequest) -> GenerateConfig:
+        """The request's GenerateConfig; PhysmotionError for what generate would refuse or the server
+        does not run (too many projections)."""
+        if not req.text.strip():
+            raise PhysmotionError("text is empty: describe a motion, e.g. 'a person walks forward'")
+        if len(req.text) > cfg.max_text:
+            raise PhysmotionError(f"text is {len(req.text)} characters long; this server takes at most {cfg.max_text}")
+        seconds = req.seconds if "seconds" in req.model_fields_set else cfg.seconds
+        if seconds is not None and not lo <= seconds <= hi:
+            raise PhysmotionError(f"seconds must be between {lo:g} and {hi:g} (the model's range), got {seconds:g}")
+        physics = cfg.physics if req.physics is None else req.physics
+        gen = GenerateConfig(seconds=seconds, physics=physics, seed=req.seed, sampler=replace(sampler))
+        runs = len(gen.physics.hook_steps(sampler.steps)) + gen.physics.projections
+        if runs > cfg.max_projections:
+            raise PhysmotionError(f"physics {physics!r} runs the simulation {runs} times; this server "
+                                  f"runs at most {cfg.max_projections} per request")  # fmt: skip
+        return gen
+
+    def run(req: GenerateRequest, gen: GenerateConfig, queued: float) -> _Served:
+        start = time.perf_counter()
+        result = generate([req.text], gen, net)
+        served = _Served(motion=result.motions[0], request=req.model_dump(),
+                         length_source=(result.length_source or ["given"])[0],
+                         queued_s=start - queued, generate_s=time.perf_counter() - start)  # fmt: skip
+        served.request["physics"] = str(gen.physics)
+        return served
+
+    def keep(served: _Served) -> str:
+        mid = f"m{next(ids)}"
+        motions[mid] = served
+        while len(motions) > max(cfg.keep, 1):
+            motions.popitem(last=False)
+        return mid
+
+    def find(mid: str) -> _Served:
+        if mid not in motions:
+            raise HTTPException(404, f"no motion {mid!r}: this server keeps its last {cfg.keep} motions")
+        return motions[mid]
+
+    if cfg.warmup:  # the text encoder, torch's kernels and the prompt cache, before the first user
+        generate([_WARMUP_TEXT], GenerateConfig(seconds=lo, physics="none", sampler=sampler), net)
+    say(f"model {name} loaded and warm in {time.perf_counter() - started:.1f} s")
+
+    @asynccontextmanager
+    async def lifespan(_app: FastAPI):
+        yield
+        worker.executor.shutdown(wait=False, cancel_futures=True)
+
+    app = FastAPI(title="physmotion serve", lifespan=lifespan, docs_url=None, redoc_url=None, openapi_url=None)
+    app.state.model = net
+    app.state.config = cfg
+
+    @app.exception_handler(RequestValidationError)
+    async def _invalid(_request, exc: RequestValidationError):
+        return _error(422, _validation_message(list(exc.errors())))
+
+    @app.exception_handler(HTTPException)
+    async def _http(_request, exc: HTTPException):
+        return _error(exc.status_code, str(exc.detail))
+
+    @app.exception_handler(PhysmotionError)
+    async def _refused(_request, exc: PhysmotionError):
+        return _error(400, str(exc))
+
+    @app.get("/", response_class=HTMLResponse)
+    def page() -> HTMLResponse:
+        return HTMLResponse(_page(cfg, lo, hi))
+
+    @app.get("/api/health")
+    def health() -> dict:
+        return {"status": "ok", "model": name, "busy": worker.pending > 0, "waiting": max(worker.pending - 1, 0)}
+
+    @app.post("/api/generate")
+    async def generate_route(req: GenerateRequest):
+        gen = check(req)
+        future = worker.submit(lambda queued=time.perf_counter(): run(req, gen, queued))
+        if future is None:
+            return _error(503, f"busy: one motion is being made and {worker.limit - 1} wait; try again in a "
+                          "moment", headers={"Retry-After": "1"})  # fmt: skip
+        try:
+            served = await asyncio.wrap_future(future)
+        except PhysmotionError as exc:
+            return _error(400, str(exc))
+        except Exception as exc:  # noqa: BLE001 - the server stays up and the request is answered
+            return _error(500, f"generation failed: {type(exc).__name__}: {exc}")
+        mid = keep(served)
+        say(f"{mid}: {req.text.strip()!r} ({served.request['physics']}, {served.motion.num_frames / FPS:g} s, "
+            f"seed {req.seed}) in {served.generate_s:.2f} s")  # fmt: skip
+        return _answer(mid, served)
+
+    @app.get("/api/motions/{mid}.npz")
+    def download_npz(mid: str) -> Response:
+        return _download(find(mid), ".npz", mid)
+
+    @app.get("/api/motions/{mid}.bvh")
+    def download_bvh(mid: str) -> Response:
+        return _download(find(mid), ".bvh", mid)
+
+    @app.get("/motions/{mid}", response_class=HTMLResponse)
+    def view(mid: str) -> HTMLResponse:
+        from physmotion.render import make_tracks
+        from physmotion.viewer import view_html
+
+        served = find(mid)
+        tracks, fps = make_tracks([served.motion], [served.motion.texts[0]])
+        return HTMLResponse(_linked(view_html(tracks, fps, title=served.motion.texts[0])))
+
+    @app.get("/assets/{name}")
+    def asset(name: str) -> Response:
+        if name not in _ASSETS:
+            raise HTTPException(404, f"no asset {name!r}")
+        return Response(_viewer_asset(_ASSETS[name]), media_type="text/javascript; charset=utf-8",
+                        headers={"Cache-Control": "max-age=86400, immutable"})
+
+    return app
+
+
+def _viewer_asset(name: str) -> str:
+    """A file of physmotion/viewer/ (its script, the vendored three.js) as text."""
+    return resources.files("physmotion.viewer").joinpath(name).read_text(encoding="utf-8")
+
+
+def _linked(page: str) -> str:
+    """A viewer page (``physmotion view``'s, scripts inlined) with its scripts linked from /assets/ instead:
+    the browser keeps them and their compiled code between motions, so only the motion's data is new.
+    A script that is not found verbatim stays inlined."""
+    for url, name in _ASSETS.items():
+        page = page.replace(f"<script>{_viewer_asset(name)}</script>", f'<script src="/assets/{url}"></script>', 1)
+    return page
+
+
+def _answer(mid: str, served: _Served) -> dict[str, Any]:
+    """The JSON answer of POST /api/generate (joints rounded to 0.1 mm)."""
+    motion = served.motion
+    return {
+        "id": mid,
+        **served.request,
+        "seconds": round(motion.num_frames / motion.fps, 3),
+        "fps": float(motion.fps),
+        "frames": int(motion.num_frames),
+        "joints": np.round(motion.joints, 4).tolist(),
+        "licence_tag": motion.licence_tag,
+        "resets": motion.resets,
+        "length_source": served.length_source,
+        "queued_s": round(served.queued_s, 3),
+        "generate_s": round(served.generate_s, 3),
+        "files": {"npz": f"/api/motions/{mid}.npz", "bvh": f"/api/motions/{mid}.bvh", "view": f"/motions/{mid}"},
+    }
+
+
+def _download(served: _Served, suffix: str, mid: str) -> Response:
+    """The motion as an .npz or .bvh attachment named after its text and seed."""
+    from physmotion.generate import slug
+    from physmotion.io.export import save_bvh
+
+    with tempfile.TemporaryDirectory(prefix="physmotion-serve-") as tmp:
+        path = Path(tmp) / f"motion{suffix}"
+        if suffix == ".npz":
+            served.motion.save(path)
+        else:
+            save_bvh(served.motion, path)
+        payload = path.read_bytes()
+    name = f"{slug(served.motion.texts[0])}_s{served.request['seed']}_{mid}{suffix}"
+    kind = "application/octet-stream" if suffix == ".npz" else "text/plain; charset=utf-8"
+    return Response(payload, media_type=kind, headers={"Content-Disposition": f'attachment; filename="{name}"'})
+
+
+def _page(cfg: ServeConfig, lo: float, hi: float) -> str:
+    """The app's page with its defaults filled in."""
+    import html
+
+    modes = list(PAGE_MODES) + ([cfg.physics] if cfg.physics not in PAGE_MODES else [])
+    options = "".join(f'<option value="{html.escape(m)}"{" selected" if m == cfg.physics else ""}>'
+                      f"{html.escape(m)}</option>" for m in modes)  # fmt: skip
+    parts = {"OPTIONS": options, "SECONDS": "" if cfg.seconds is None else f"{cfg.seconds:g}",
+             "RANGE": f"{lo:g} to {hi:g} s"}
+    text = resources.files(__package__).joinpath("page.html").read_text(encoding="utf-8")
+    return re.sub(r"\{\{([A-Z]+)\}\}", lambda m: parts[m.group(1)], text)
+
+
+def check_physics(spec: str) -> str:
+    """The canonical spelling of a physics mode; PhysmotionError for one generate does not know."""
+    from physmotion.generate import GenerateConfig
+
+    return str(GenerateConfig(physics=spec).physics)
+
+
+def bind(host: str, port: int) -> socket.socket:
+    """A listening TCP socket on ``host``:``port`` (0: any free port); PhysmotionError if it is taken."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+    except OSError as exc:
+        sock.close()
+        raise PhysmotionError(f"cannot listen on {host}:{port} ({exc.strerror}); choose another --port") from None
+    sock.listen(128)
+    return sock
+
+
+def serve(app: Any, sock: socket.socket, log_level: str = "warning") -> None:
+    """Run ``app`` under uvicorn on the bound socket ``sock`` until interrupted (Ctrl-C)."""
+    import uvicorn
+
+    server = uvicorn.Server(uvicorn.Config(app, log_level=log_level, timeout_graceful_shutdown=2))
+    server.run(sockets=[sock])
+
+
+def url_of(sock: socket.socket) -> str:
+    """The http:// address a browser opens for a bound socket."""
+    host, port = sock.getsockname()[:2]
+    return f"http://{f'[{host}]' if ':' in host else host}:{port}/"
+
