@@ -440,7 +440,7 @@ def generate_cmd(
                                       "the shipped default model if left out."),
     fine_step: bool = typer.Option(False, "--fine-step", help="Simulate the projection at 1/720 s instead "
                                    "of 1/360 s: PhysDiff on unseen prompts 12.5 -> 11.2 mm Phys-Err, for "
-                                   "1.3-1.4x PhysDiff's time (bench/generate.py)."),
+                                   "1.3-1.4x PhysDiff's time (experiments/generate_speed.py)."),
     controller: str = typer.Option("tracker", help=CONTROLLER_HELP),
     policy: Path | None = typer.Option(None, help=POLICY_HELP),
     preview: bool = typer.Option(True, help="Write a GIF preview per motion."),

@@ -2,7 +2,7 @@
 
 README.md's results table is docs/make_readme_table.py's output; docs/results.md, results/README.md and
 the model cards quote figures in their text. The JSON files are written by the commands results/README.md
-names (``physmotion evaluate``, ``bench/physdiff_quality.py --json``, ``scripts/schedule_study.py``, ...);
+names (``physmotion evaluate``, ``experiments/physdiff_quality.py``, ``experiments/schedule_study.py``, ...);
 a re-run that changes a figure fails here until the docs say the new one. docs/decisions/ is the dated
 record of experiments (many from one-off scripts) and is not checked here.
 """
@@ -63,7 +63,7 @@ def evaluate_quotes() -> list[str]:
 
 
 def bench_quotes() -> list[str]:
-    """bench/physdiff_quality.py's table (results/physdiff_quality.json): means over the seeds."""
+    """experiments/physdiff_quality.py's table (results/physdiff_quality.json): means over the seeds."""
     runs = _load("physdiff_quality.json")["runs"]
     err = {m: float(np.mean([r[m]["phys_err"] for r in runs])) for m in runs[0]}
     return [
@@ -87,7 +87,7 @@ def schedule_quotes() -> list[str]:
 
 
 def morph_quotes() -> list[str]:
-    """The Morph table (results/morph.json, by scripts/morph_table.py) as the docs quote it: each figure from
+    """The Morph table (results/morph.json, by experiments/morph.py) as the docs quote it: each figure from
     the base model through every round."""
     rows = _load("morph.json")["rows"]
 
@@ -114,7 +114,7 @@ def morph_quotes() -> list[str]:
 
 
 def dynamic_quotes() -> list[str]:
-    """P on every captured clip by category (results/projection_dynamic.json, scripts/projection_dynamic.py)."""
+    """P on every captured clip by category (results/projection_dynamic.json, experiments/projection_dynamic.py)."""
     configs = _load("projection_dynamic.json")["configs"]
     now, before = configs["default"], configs["tracker v0.1"]
     loco, run, jump = now["walks+runs"], now["run"], now["jump"]
@@ -152,7 +152,7 @@ def dynamic_doc_quotes() -> list[str]:
 
 
 def _prompts_mean(runs: dict, mode: str, key: str = "phys_err", seed: int | None = None) -> float:
-    """A bench/physdiff_quality.py figure (category -> one row per seed) averaged over the categories in
+    """An experiments/physdiff_quality.py figure (category -> one row per seed) averaged over the categories in
     ``runs`` and over the seeds, or at one ``seed``."""
     return float(np.mean([r[mode][key] for rows in runs.values() for s, r in enumerate(rows)
                           if seed in (None, s)]))  # fmt: skip
@@ -214,7 +214,7 @@ def biomodiffuse_quotes() -> list[str]:
 
 
 def _refine_rows(name: str) -> dict:
-    """A refine table (scripts/refine_table.py) by setting: "2 cm | refine 0.3" -> its row."""
+    """A refine table (experiments/refine.py) by setting: "2 cm | refine 0.3" -> its row."""
     return {r["setting"]: r for r in _load(name)["rows"]}
 
 

@@ -1,7 +1,7 @@
 """Reference shaping: what the tracker is asked to follow, made from the motion it must imitate.
 
 Corrections of a retargeted reference (qpos at the control rate), each measured on all 203
-walking/running clips of the bundled mocap (bench/projection_quality.py) and on the issue's test
+walking/running clips of the bundled mocap (experiments/projection_quality.py) and on the issue's test
 motions (tests/physics/test_projection.py); the figures, and the alternatives measured against them,
 are in docs/decisions/projection.md:
 

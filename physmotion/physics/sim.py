@@ -5,7 +5,7 @@ One closed-loop episode is a Python loop over control steps (30 Hz) of ``substep
 runs each motion whole in a worker process (:mod:`physmotion.physics.workers`), since the controller's
 Python holds the GIL. ``mujoco.rollout`` cannot be used: it steps a fixed, open-loop control sequence,
 and this controller is closed-loop (the root residual's PD reads the simulated state at every step);
-docs/decisions/projection.md: "worker processes for a batch of motions". ``bench/physics.py`` compares raw
+docs/decisions/projection.md: "worker processes for a batch of motions". ``experiments/physics_speed.py`` compares raw
 stepping with the projection.
 """
 

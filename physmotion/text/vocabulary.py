@@ -1,7 +1,7 @@
 """The words a model saw in its training captions, and the words of a prompt it never saw.
 
 A model folder may ship ``vocabulary.txt`` (one lower-case word per line, written by
-``scripts/model_vocabulary.py``); ``physmotion generate`` then warns about prompt words outside it.
+``experiments/model_vocabulary.py``); ``physmotion generate`` then warns about prompt words outside it.
 A folder without the file gets no warning: nothing is known about what it saw.
 """
 
