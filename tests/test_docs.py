@@ -90,7 +90,7 @@ POINTER = re.compile(r"decisions(?:/(\w+))?\.md[:,]?\s*(?:#\s*)?\(?\"([^\"\n]+)"
 
 
 def _pointer_files() -> list[Path]:
-    files = [p for top in ("physmotion", "scripts", "bench", "tests", "docs", "results", "experiments")
+    files = [p for top in ("physmotion", "experiments", "tests", "docs", "results")
              for p in (ROOT / top).rglob("*") if p.suffix in {".py", ".md"} and p.is_file()]
     here = Path(__file__).resolve()
     return [p for p in files + [README, ROOT / "Makefile"]
