@@ -371,8 +371,9 @@ def refine_cmd(
     """Refine a motion by DDIM inversion and denoising (BioMoDiffuse Sec. 3.5; physics guidance with a
     BioMoDiffuse model)."""
     from physmotion.diffusion.model import MotionDiffusion
-    from physmotion.diffusion.refine import RefineConfig, check_motion, refine
+    from physmotion.diffusion.refine import RefineConfig
     from physmotion.motion import Motion
+    from physmotion.pipelines.refine import RefinePipeline
 
     config = RefineConfig(strength=strength, steps=steps, text=text, phys_scale=phys_scale,
                           smooth_hz=smooth_hz or None, anchor_hz=anchor_hz or None)
@@ -388,15 +389,11 @@ def refine_cmd(
         motion = import_clip(path, rig=rig, fps=fps, mapping=mapping)
     else:
         motion = Motion.load(path)
-    model = MotionDiffusion.load(_model_dir(model_dir))
-    check_motion(motion.joints, motion.fps, model)  # length and NaN before the work
-    joints = refine(model, motion.joints, motion.fps, config)
-    # every restriction of the input's and of the model's data travels (NC, SA: joined "NC,SA")
-    tags = {t for t in motion.licence_tag.split(",") if t} | set(model.info.get("licence_tags", []))
-    licence = ",".join(sorted(tags - {"open", "unknown"})) or model.licence_tag
-    Motion(joints=joints, fps=FPS, texts=list(motion.texts) or ([text] if text else []), licence_tag=licence,
-           source=motion.source).save(out)  # fmt: skip
-    console.print(f"wrote {out}: {len(joints)} frames, strength {strength:g}", highlight=False)
+    pipeline = RefinePipeline(MotionDiffusion.load(_model_dir(model_dir)), config)
+    pipeline.check(motion)  # length and NaN before the work
+    refined = pipeline(motion).motion
+    refined.save(out)
+    console.print(f"wrote {out}: {len(refined.joints)} frames, strength {strength:g}", highlight=False)
 
 
 @app.command("generate")
@@ -531,7 +528,7 @@ def _check_generate_early(texts, model, prompt_file, prompts, *, seconds, num, p
     import json
     import math
 
-    from physmotion.physics_mode import PhysicsMode
+    from physmotion.pipelines.modes import PhysicsMode
 
     if any(not t.strip() for t in texts):
         raise PhysmotionError("text is empty: describe a motion, e.g. 'a person walks forward'")
@@ -783,7 +780,7 @@ def evaluate_cmd(
     from physmotion.diffusion.samplers import default_sampler
     from physmotion.eval.evaluator import Evaluator
     from physmotion.eval.table import EvaluateConfig, evaluate, table_paths
-    from physmotion.physics_mode import parse_modes
+    from physmotion.pipelines.modes import parse_modes
 
     for written in table_paths(out):  # EvalTable.write's names
         _check_out(written, overwrite)

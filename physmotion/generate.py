@@ -1,17 +1,15 @@
 """Text in, physically plausible motion out: the product's main job, behind ``physmotion generate``.
 
-``GenerateConfig.physics`` (a :class:`~physmotion.physics_mode.PhysicsMode`, or its spelling) picks how
-physics enters: ``none``, ``none+floor``, ``post[:K]``, ``physdiff[:SCHEDULE]`` (the default, PhysDiff's
-``end:4,space:1`` of 50 DDIM steps) or ``morph``.
+This module checks a request, chooses each motion's length, hands the work to the pipeline of
+``GenerateConfig.physics`` (:func:`pipeline_for`; the methods live in :mod:`physmotion.pipelines`) and
+writes the files. The modes: ``none``, ``none+floor``, ``post[:K]``, ``physdiff[:SCHEDULE]`` (the default,
+PhysDiff's ``end:4,space:1`` of 50 DDIM steps) or ``morph``.
 
 P in generation is :meth:`ProjectionConfig.sampling`: where the humanoid falls (its error passes 0.15 m)
 it is put back on the motion and the simulation goes on (reset-on-fail), so the output is always the
 simulation and never the kinematic input. Every reset is a jump in the output and is counted
-(``GenerateResult.resets``, ``generate.json``).
-
-``morph`` is Morph's inference (Sec. 3.3): one P after sampling with Morph's imitation selection
-(``GenerateConfig.morph_projection``, :class:`ProjectionConfig`'s defaults: no reset, tau 0.5 m): where
-the humanoid fails to imitate a motion the sampled motion is kept, and counted as an imitation failure
+(``GenerateResult.resets``, ``generate.json``). ``morph`` uses ``GenerateConfig.morph_projection``
+(:class:`ProjectionConfig`'s defaults: no reset, tau 0.5 m) with Morph's imitation selection
 (``GenerateResult.imitation_failed``; ``imitation_failure_rate`` in ``generate.json`` and the tables).
 """
 
@@ -30,14 +28,15 @@ import numpy as np
 
 from physmotion.conventions import FPS, MIN_FRAMES
 from physmotion.diffusion.model import MotionDiffusion
-from physmotion.diffusion.physdiff import FeatureProjector, ProjectionLog, on_data_floor, projection_settings
-from physmotion.diffusion.samplers import SamplerConfig, sample
+from physmotion.diffusion.physdiff import projection_settings
+from physmotion.diffusion.samplers import SamplerConfig
 from physmotion.errors import PhysmotionError
-from physmotion.features.humanml3d import recover_from_ric
-from physmotion.motion import Motion, write_atomic
 from physmotion.metrics.report import residual_line
+from physmotion.motion import write_atomic
 from physmotion.physics.projection import ProjectionConfig
-from physmotion.physics_mode import FLOOR, MORPH, PHYSDIFF, POST, PhysicsMode
+from physmotion.pipelines.base import Pipeline
+from physmotion.pipelines.modes import FLOOR, MORPH, NONE, PHYSDIFF, POST, PhysicsMode
+from physmotion.pipelines.result import GenerateResult
 
 GENERATE_LOG = "generate.json"
 
@@ -67,26 +66,6 @@ class GenerateConfig:
         """This run with every P driven by ``controller`` ("tracker" or "policy"; ``generate --controller``)."""
         return replace(self, projection=self.projection.with_controller(controller, policy),
                        morph_projection=self.morph_projection.with_controller(controller, policy))  # fmt: skip
-
-
-@dataclass
-class GenerateResult:
-    motions: list[Motion]  # len(texts) * num, text-major
-    features: list[np.ndarray]  # (T, 263) un-normalised, one per motion
-    projections: ProjectionLog
-    resets: list[int] = field(default_factory=list)  # per motion: resets in the projection it came from
-    # morph, per motion: the imitation failed and the sampled motion was kept (empty in the other modes)
-    imitation_failed: list[bool] = field(default_factory=list)
-    # per motion: its length in frames and where it came from, "given" or "predicted" (from the text)
-    lengths: list[int] = field(default_factory=list)
-    length_source: list[str] = field(default_factory=list)
-
-    @property
-    def bodies(self) -> list[np.ndarray | None]:
-        """Per motion, the humanoid body (22, 3) whose simulation (or surface, for none+floor) the output
-        is (``Motion.humanoid``), or None where the output was not put on a body (none; physdiff without
-        a projection at the last step)."""
-        return [m.humanoid for m in self.motions]
 
 
 def check_request(texts: Sequence[str], config: GenerateConfig, model: MotionDiffusion) -> int | None:
@@ -145,60 +124,25 @@ def generate(
     prompts = [t.strip() for t in texts for _ in range(cfg.num)]
     lengths = [int(n) for n in lengths for _ in range(cfg.num)]
     sources = [s for s in sources for _ in range(cfg.num)]
-    mode = cfg.physics
-    projector = FeatureProjector(model, cfg.morph_projection if mode.kind == MORPH else cfg.projection)
-    hook_steps = mode.hook_steps(cfg.sampler.steps)
-    total = cfg.sampler.steps + mode.projections
-    report = (lambda i, n: on_step(i, total)) if on_step else None
-    x = sample(model, prompts, lengths, cfg.sampler, seed=cfg.seed,
-               hook=projector if hook_steps else None, hook_steps=hook_steps, on_step=report)  # fmt: skip
-    feats = model.normalizer.denormalize(x.float().cpu().numpy())
-    feats = [f[:n] for f, n in zip(feats, lengths)]
-    joints = [recover_from_ric(f.astype(np.float64)) for f in feats]
-    bodies: list[np.ndarray | None] = [None] * len(joints)
-    resets = [0] * len(joints)
-    residuals: list[np.ndarray | None] = [None] * len(joints)
-    if mode.kind == PHYSDIFF and hook_steps[-1:] == [cfg.sampler.steps - 1]:
-        # The last step was projected, and DDIM's last step returns x0 itself: the output is P's
-        # simulated motion, kept in physical coordinates (soles on the floor) rather than re-floored.
-        joints, bodies, resets = projector.last_joints, list(projector.last_bodies), projector.last_resets
-        residuals = list(projector.last_residuals)
+    result = pipeline_for(cfg, model)(prompts, lengths, seed=cfg.seed, on_step=on_step)
+    result.length_source = sources
+    return result
+
+
+def pipeline_for(config: GenerateConfig, model: MotionDiffusion) -> Pipeline:
+    """The pipeline of ``config.physics``, with the run's sampler and P's settings."""
+    from physmotion.pipelines.morph import MorphPipeline
+    from physmotion.pipelines.physdiff import PhysDiffPipeline, PostProjectionPipeline
+    from physmotion.pipelines.plain import FloorPipeline, PlainPipeline
+
+    mode, sampler = config.physics, config.sampler
+    if mode.kind == PHYSDIFF:
+        return PhysDiffPipeline(model, sampler, config.projection, schedule=mode.schedule)
     if mode.kind == POST:
-        for k in range(mode.projections):
-            given = [on_data_floor(j) for j in joints] if k else projector.data_floor(joints)
-            joints = projector.project_joints(given)
-            bodies, resets = list(projector.last_bodies), projector.last_resets
-            residuals = list(projector.last_residuals)
-            if on_step:
-                on_step(cfg.sampler.steps + k + 1, total)
-    failed: list[bool] = []
+        return PostProjectionPipeline(model, sampler, config.projection, projections=mode.projections)
     if mode.kind == MORPH:
-        # Sec. 3.3 "Inference": App. A's pre-processing ("used for training and inference"), one P, and the
-        # imitation selection as post-process. A kept input is the pre-processed motion with its first
-        # frame's lowest point on the floor; it was not simulated on a body, so it has none.
-        from physmotion.morph.preprocess import PreprocessConfig, floor_first_frame, preprocess
-
-        joints = projector.project_joints([preprocess(j, PreprocessConfig()) for j in joints])
-        failed = [not s for s in projector.log.selected[-len(joints):]]
-        joints = [floor_first_frame(j, physical=True) if f else j for j, f in zip(joints, failed)]
-        bodies = [None if f else b for b, f in zip(projector.last_bodies, failed)]
-        resets = projector.last_resets
-        residuals = [None if f else r for r, f in zip(projector.last_residuals, failed)]
-        if on_step:
-            on_step(cfg.sampler.steps + 1, total)
-    if mode.kind == FLOOR:
-        from physmotion.physics.surface import ground_on_surface
-
-        joints, bodies = (list(z) for z in zip(*(ground_on_surface(j) for j in joints)))
-    motions = [
-        Motion(joints=j, fps=FPS, texts=[p], licence_tag=model.licence_tag,
-               source=f"physmotion generate ({mode})", humanoid=b,
-               resets=r if mode.projects and b is not None else None,
-               residual=res if mode.projects and b is not None else None)
-        for j, p, b, r, res in zip(joints, prompts, bodies, resets, residuals)
-    ]
-    return GenerateResult(motions=motions, features=list(feats), projections=projector.log,
-                          resets=list(resets), imitation_failed=failed, lengths=lengths, length_source=sources)
+        return MorphPipeline(model, sampler, config.morph_projection)
+    return {NONE: PlainPipeline, FLOOR: FloorPipeline}[mode.kind](model, sampler)
 
 
 def slug(text: str, limit: int = 40) -> str:
@@ -379,6 +323,7 @@ def write_outputs(
         "prompts": texts,
         "seed": config.seed,
         "model": str(model) if model is not None else "default (physmotion/weights/default)",
+        "pipeline": result.settings.get("pipeline"),  # the class that made the motions (physmotion/pipelines)
         "settings": settings,
         "preview": preview,
         "unknown_words": {t: w for t, w in (unknown or {}).items() if w},

@@ -61,8 +61,22 @@ def parse_schedule(spec: str, steps: int) -> list[int]:
 
 
 @dataclass
+class Projected:
+    """What one application of P did to a list of motions, in the order given."""
+
+    joints: list[np.ndarray]  # (T_i, 22, 3) P's output, physical coordinates (soles on the floor)
+    bodies: list[np.ndarray]  # (22, 3) the humanoid body each was simulated with
+    resets: list[int]  # times the humanoid was put back onto the motion (a jump in the output)
+    residuals: list[np.ndarray]  # (T_i, 2) the root residual it used (ProjectedMotion.residual)
+    selected: list[bool]  # the simulation was returned (not the input)
+    tracked: list[bool]  # ... and the humanoid never fell (no reset)
+    mpjpe_mm: list[float]  # mean distance to the input
+    residual_force: list[float]  # mean root residual force, body weights
+
+
+@dataclass
 class ProjectionLog:
-    """What the projections did: one entry per projected motion."""
+    """What the projections of a run did: one entry per projected motion, over all of P's calls."""
 
     calls: int = 0
     selected: list[bool] = field(default_factory=list)  # the simulation was returned
@@ -71,58 +85,63 @@ class ProjectionLog:
     residual: list[float] = field(default_factory=list)
     resets: list[int] = field(default_factory=list)  # times the humanoid was put back (a jump in the output)
 
+    def add(self, done: Projected) -> Projected:
+        """Count one call of P; returns ``done``."""
+        self.calls += 1
+        self.selected += done.selected
+        self.tracked += done.tracked
+        self.mpjpe_mm += done.mpjpe_mm
+        self.residual += done.residual_force
+        self.resets += done.resets
+        return done
+
 
 class FeatureProjector:
-    """P on normalised HumanML3D features: (B, T, 263) normalised + lengths -> same, physically projected."""
+    """P on normalised HumanML3D features: (B, T, 263) normalised + lengths -> same, physically projected.
+
+    Stateless: every call returns what P did (:class:`Projected`); a caller that keeps a run's account
+    adds it to a :class:`ProjectionLog`."""
 
     def __init__(self, model: MotionDiffusion, config: ProjectionConfig | None = None, fps: float = FPS) -> None:
         self.model, self.config, self.fps = model, config or ProjectionConfig.sampling(), fps
-        self.log = ProjectionLog()
-        self.last_joints: list[np.ndarray] = []  # P's output of the latest call, physical coordinates
-        self.last_bodies: list[np.ndarray] = []  # ... and the humanoid bodies it was simulated with
-        self.last_resets: list[int] = []  # ... and how often each was reset
-        self.last_residuals: list[np.ndarray] = []  # ... and the root residual (T, 2) it used
 
     def data_floor(self, joints: list[np.ndarray]) -> list[np.ndarray]:
         """Joints recovered from the model's samples, put in the data convention P takes: a FLOOR_SURFACE
         model's motions go onto their lowest joint (P raises the soles back onto the floor itself)."""
         return [on_data_floor(j) for j in joints] if self.model.floor == FLOOR_SURFACE else list(joints)
 
-    def project_joints(self, joints: list[np.ndarray]) -> list[np.ndarray]:
+    def project_joints(self, joints: list[np.ndarray]) -> Projected:
         """Project a list of joint arrays (T_i, 22, 3) in the data convention; motions of equal length go
         through in one batch."""
-        out: list[np.ndarray] = [np.empty(0)] * len(joints)
-        bodies: list[np.ndarray] = [np.empty(0)] * len(joints)
-        resets = [0] * len(joints)
-        residuals: list[np.ndarray] = [np.empty(0)] * len(joints)
+        n = len(joints)
+        done = Projected(joints=[np.empty(0)] * n, bodies=[np.empty(0)] * n, resets=[0] * n,
+                         residuals=[np.empty(0)] * n, selected=[False] * n, tracked=[False] * n,
+                         mpjpe_mm=[0.0] * n, residual_force=[0.0] * n)  # fmt: skip
         by_len: dict[int, list[int]] = {}
         for i, j in enumerate(joints):
             by_len.setdefault(len(j), []).append(i)
         for idx in by_len.values():
             res = project(np.stack([joints[i] for i in idx]), self.fps, self.config)
             for k, i in enumerate(idx):
-                out[i], bodies[i], resets[i] = res.joints[k], res.body[k], int(res.resets[k])
-                residuals[i] = res.residual[k]
-                self.log.resets.append(resets[i])
-                self.log.selected.append(bool(res.selected[k]))
-                self.log.tracked.append(bool(res.success[k]))
-                self.log.mpjpe_mm.append(float(1000 * res.mpjpe[k].mean()))
-                self.log.residual.append(float(res.residual_force[k].mean()))
-        self.log.calls += 1
-        self.last_joints, self.last_bodies, self.last_resets = out, bodies, resets
-        self.last_residuals = residuals
-        return out
+                done.joints[i], done.bodies[i], done.resets[i] = res.joints[k], res.body[k], int(res.resets[k])
+                done.residuals[i] = res.residual[k]
+                done.selected[i], done.tracked[i] = bool(res.selected[k]), bool(res.success[k])
+                done.mpjpe_mm[i] = float(1000 * res.mpjpe[k].mean())
+                done.residual_force[i] = float(res.residual_force[k].mean())
+        return done
 
-    def __call__(self, x0: torch.Tensor, lengths: list[int]) -> torch.Tensor:
+    def project_features(self, x0: torch.Tensor, lengths: list[int]) -> tuple[torch.Tensor, Projected]:
+        """P on a denoised x0 (B, T, D) normalised, as PhysDiff's Algorithm 2 applies it inside sampling:
+        returns the projected x0 (same shape; frames past each length as given) and what P did."""
         norm = self.model.normalizer
         feats = norm.denormalize(x0.detach().float().cpu().numpy())
         joints = [recover_from_ric(feats[i, :n].astype(np.float64)) for i, n in enumerate(lengths)]
-        projected = self.project_joints(self.data_floor(joints))
+        done = self.project_joints(self.data_floor(joints))
         out = x0.detach().clone()
         dim = x0.shape[-1]  # 263, or BioMoDiffuse's 329: the features are re-extracted in the model's own
-        for i, (n, j) in enumerate(zip(lengths, projected)):
+        for i, (n, j) in enumerate(zip(lengths, done.joints)):
             out[i, :n] = torch.from_numpy(norm.normalize(joints_to_features(j, dim, self.model.floor))).to(out)
-        return out
+        return out, done
 
 
 def on_data_floor(joints: np.ndarray) -> np.ndarray:

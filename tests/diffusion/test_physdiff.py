@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from physmotion.diffusion.physdiff import FeatureProjector, joints_to_features
+from physmotion.diffusion.physdiff import FeatureProjector, ProjectionLog, joints_to_features
 from physmotion.features.humanml3d import recover_from_ric
 
 
@@ -31,11 +31,12 @@ def test_projector_simulates_a_real_walk(built_dir: Path, tiny_model) -> None:
     feats = _walk(built_dir)
     x0 = torch.from_numpy(tiny_model.normalizer.normalize(feats)).float()[None]
     x0 = torch.cat([x0, torch.zeros(1, 8, x0.shape[-1])], dim=1)  # padded as in a mixed-length batch
-    proj = FeatureProjector(tiny_model)
-    out = proj(x0, [80])
+    out, done = FeatureProjector(tiny_model).project_features(x0, [80])
     assert out.shape == x0.shape and torch.equal(out[:, 80:], x0[:, 80:])
-    assert proj.log.calls == 1 and proj.log.selected == [True]
-    assert proj.log.mpjpe_mm[0] < 100
+    assert done.selected == [True] and done.mpjpe_mm[0] < 100
+    assert done.joints[0].shape == (80, 22, 3) and done.bodies[0].shape == (22, 3)
+    log = ProjectionLog()
+    assert log.add(done) is done and log.calls == 1 and log.selected == [True] and log.resets == done.resets
     sim = recover_from_ric(tiny_model.normalizer.denormalize(out[0, :80].numpy()).astype(np.float64))
     ref = recover_from_ric(feats.astype(np.float64))
     err = np.linalg.norm((sim - sim[:, :1]) - (ref - ref[:, :1]), axis=-1).mean()

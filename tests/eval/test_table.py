@@ -10,7 +10,7 @@ from physmotion.diffusion.samplers import SamplerConfig
 from physmotion.errors import PhysmotionError
 from physmotion.eval.table import REAL, EvaluateConfig, evaluate, table_paths
 from physmotion.generate import GenerateConfig
-from physmotion.physics_mode import PhysicsMode, parse_modes
+from physmotion.pipelines.modes import PhysicsMode, parse_modes
 
 
 def test_parse_modes_keeps_schedule_commas_and_spells_back():

@@ -1,0 +1,81 @@
+"""PhysDiff (Yuan et al. 2023): the physics projection P inside the sampler at scheduled steps (Algorithm 2,
+``physdiff[:SCHEDULE]``), and the paper's post-processing baseline, P applied K times after sampling
+(``post[:K]``). P is :class:`~physmotion.diffusion.physdiff.FeatureProjector` on the generation preset
+(``ProjectionConfig.sampling()``): where the humanoid falls it is put back on the motion (a reset, counted)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import torch
+
+from physmotion.diffusion.model import MotionDiffusion
+from physmotion.diffusion.physdiff import FeatureProjector, Projected, ProjectionLog, on_data_floor
+from physmotion.diffusion.samplers import SamplerConfig, sample
+from physmotion.physics.projection import ProjectionConfig
+from physmotion.pipelines.base import Physical, Pipeline, Progress
+from physmotion.pipelines.modes import DEFAULT_SCHEDULE, PhysicsMode
+
+
+def _physical(done: Projected) -> Physical:
+    return Physical(done.joints, list(done.bodies), done.resets, list(done.residuals))
+
+
+class PhysDiffPipeline(Pipeline):
+    """P at the loop indices of ``schedule`` (``end:4,space:1``: the last four steps)."""
+
+    projects = True
+
+    def __init__(self, model: MotionDiffusion, sampler: SamplerConfig | None = None,
+                 projection: ProjectionConfig | None = None, schedule: str = DEFAULT_SCHEDULE) -> None:  # fmt: skip
+        super().__init__(model, sampler, projection or ProjectionConfig.sampling())
+        self.mode = PhysicsMode.parse(f"physdiff:{schedule}")
+        self.name = str(self.mode)
+        self.steps = self.mode.hook_steps(self.sampler.steps)  # raises for a schedule that does not fit
+
+    def _sample(self, prompts: list[str], lengths: list[int], seed: int, log: ProjectionLog,
+                on_step: Progress | None) -> tuple[torch.Tensor, Physical | None]:  # fmt: skip
+        projector = FeatureProjector(self.model, self.projection)
+        done: list[Projected] = []
+
+        def hook(x0: torch.Tensor, hook_lengths: list[int]) -> torch.Tensor:
+            x, projected = projector.project_features(x0, hook_lengths)
+            done.append(log.add(projected))
+            return x
+
+        x = sample(self.model, prompts, lengths, self.sampler, seed=seed, hook=hook, hook_steps=self.steps,
+                   on_step=on_step)  # fmt: skip
+        if self.steps[-1:] == [self.sampler.steps - 1]:
+            # The last step was projected, and DDIM's last step returns x0 itself: the output is P's
+            # simulated motion, kept in physical coordinates (soles on the floor) rather than re-floored.
+            return x, _physical(done[-1])
+        return x, None
+
+
+class PostProjectionPipeline(Pipeline):
+    """P applied ``projections`` times to the sampled motions, each pass on the last one's output."""
+
+    projects = True
+
+    def __init__(self, model: MotionDiffusion, sampler: SamplerConfig | None = None,
+                 projection: ProjectionConfig | None = None, projections: int = 1) -> None:  # fmt: skip
+        super().__init__(model, sampler, projection or ProjectionConfig.sampling())
+        self.mode = PhysicsMode.parse(f"post:{projections}")
+        self.name = str(self.mode)
+
+    @property
+    def projections_after(self) -> int:
+        return self.mode.projections
+
+    def _after(self, joints: list[np.ndarray], log: ProjectionLog,
+               on_projection: Callable[[int], None] | None) -> Physical:  # fmt: skip
+        projector = FeatureProjector(self.model, self.projection)
+        out = Physical.kinematic(joints)
+        for k in range(self.mode.projections):
+            # the sampled motion in P's convention first, then each pass's output on its lowest joint
+            given = [on_data_floor(j) for j in out.joints] if k else projector.data_floor(out.joints)
+            out = _physical(log.add(projector.project_joints(given)))
+            if on_projection:
+                on_projection(k + 1)
+        return out
