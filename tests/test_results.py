@@ -357,3 +357,16 @@ def test_relative_links_exist(doc: str) -> None:
     path = DOCS[doc]
     for target in re.findall(r"\]\(([^)#:]+)\)", path.read_text()):
         assert (path.parent / target).exists(), f"{path.name} links to a missing {target}"
+
+
+def test_every_result_names_its_preset_commit_and_command() -> None:
+    """Each results/*.json carries the experiments' meta block (experiments/_results.py): P's preset(s) by
+    their registry names (null where no projection runs), the commit, the CPU, the date and the command."""
+    from physmotion.physics.presets import preset_names
+
+    for path in sorted(RESULTS.glob("*.json")):
+        meta = json.loads(path.read_text())["meta"]
+        missing = {"preset", "commit", "cpu", "date", "command"} - set(meta)
+        assert not missing, f"{path.name}: its meta lacks {sorted(missing)}"
+        named = meta["preset"].values() if isinstance(meta["preset"], dict) else [meta["preset"]]
+        assert all(p is None or p in preset_names() for p in named), f"{path.name}: preset {meta['preset']}"
