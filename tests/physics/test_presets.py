@@ -41,3 +41,30 @@ def test_an_unknown_preset_names_the_known_ones() -> None:
     with pytest.raises(PhysmotionError, match="unknown projection preset 'fast'; known: plain, sampling") as exc:
         preset("fast")
     assert "\n" not in str(exc.value)
+
+
+def test_docs_list_every_preset() -> None:
+    """docs/cli.md's project section lists each preset of the registry."""
+    from pathlib import Path
+
+    text = (Path(__file__).parents[2] / "docs" / "cli.md").read_text()
+    project = text.split("\n## project\n", 1)[1].split("\n## ", 1)[0]
+    assert [name for name in preset_names() if f"| `{name}` |" not in project] == []
+
+
+def test_project_takes_a_preset_by_name(mocap_dir, tmp_path) -> None:
+    """`physmotion project --preset sampling` runs generation's P (a reset count, no input kept); an unknown
+    name fails in one line that lists the known ones."""
+    from physmotion.io.importer import import_clip, load_manifest
+    from physmotion.motion import Motion
+    from tests.cli_runner import invoke
+
+    info = {c.clip: c for c in load_manifest(mocap_dir)}["bandai2_dataset-2_walk_normal_001"]
+    motion = import_clip(info, floor="frame0", fps=20)
+    Motion(joints=motion.joints[:40], fps=20).save(tmp_path / "walk.npz")
+    res = invoke("project", tmp_path / "walk.npz", "-o", tmp_path / "out.npz", "--preset", "sampling")
+    assert res.returncode == 0, res.stderr
+    assert Motion.load(tmp_path / "out.npz").resets is not None
+    res = invoke("project", tmp_path / "walk.npz", "-o", tmp_path / "bad.npz", "--preset", "fast")
+    assert res.returncode == 1 and "unknown projection preset 'fast'; known: plain, sampling" in res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1
