@@ -249,15 +249,20 @@ def project_motion(
                                    "9.7 mm), for twice the simulation steps; results/projection_dynamic.md."),
     controller: str = typer.Option("tracker", help=CONTROLLER_HELP),
     policy: Path | None = typer.Option(None, help=POLICY_HELP),
+    preset_name: str = typer.Option("plain", "--preset", help="P's preset by name (physmotion/physics/presets.py; "
+                                    "docs/cli.md lists them): 'plain' keeps the input where the imitation fails, "
+                                    "'sampling' is generation's P; --ilc and --fine-step apply on top."),
 ) -> None:
     """Physics projection (PhysDiff's P): imitate the motion with the simulated humanoid."""
     from dataclasses import replace
 
     from physmotion.metrics.report import residual_line
     from physmotion.motion import Motion
-    from physmotion.physics.projection import ProjectionConfig, project
+    from physmotion.physics.presets import preset
+    from physmotion.physics.projection import project
 
-    config = ProjectionConfig(ilc_passes=ilc).with_controller(controller, _opt_str(policy))
+    config = preset(preset_name).with_controller(controller, _opt_str(policy))
+    config = replace(config, ilc_passes=ilc) if ilc else config
     config = config.at_fine_step() if fine_step else config
     _check_out(out, overwrite)
     motion = Motion.load(path)
@@ -268,8 +273,8 @@ def project_motion(
     replace(motion, joints=result.joints, rotations=None, offsets=None, humanoid=body, resets=resets,
             residual=residual).save(out)
     kept = "simulation kept" if result.selected else "tracking failed: input kept (flagged)"
-    if ilc:
-        kept += f" (pass {int(result.ilc_pass)} of {ilc + 1})"
+    if config.ilc_passes:
+        kept += f" (pass {int(result.ilc_pass)} of {config.ilc_passes + 1})"
     console.print(f"wrote {out} ({controller}): {kept}; MPJPE mean {1000 * result.mpjpe.mean():.0f} mm, "
                   f"{residual_line(result.residual)} (W: body weight); a joint's torque over its actuator's "
                   f"limit in {100 * result.over_limit.mean():.1f} % of frames", highlight=False)  # fmt: skip
