@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import tempfile
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -156,6 +156,13 @@ def _check_pose_arrays(motion: Motion, path: Path) -> None:
         if arr.shape != shape or not np.all(np.isfinite(arr)):
             raise MotionFormatError(f"{path}: '{name}' must be finite with shape {shape}, got {arr.shape}")
         setattr(motion, name, arr)
+
+
+def joined_licence_tag(tags: Iterable[str]) -> str:
+    """The licence tag of something made from sources with these tags: every restriction they carry
+    ("NC", "SA"; a tag may already be a joined "NC,SA"), sorted and joined with ","; "open" if none."""
+    found = {part for tag in tags for part in str(tag).split(",") if part and part not in ("open", "unknown")}
+    return ",".join(sorted(found)) or "open"
 
 
 def check_joints(joints: np.ndarray, name: str = "joints") -> None:

@@ -74,3 +74,11 @@ def test_write_atomic_leaves_nothing_on_failure(tmp_path: Path) -> None:
     with pytest.raises(RuntimeError):
         write_atomic(tmp_path / "out.bin", fail)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_joined_licence_tag_keeps_every_restriction() -> None:
+    from physmotion.motion import joined_licence_tag
+
+    assert joined_licence_tag(["NC", "open"]) == "NC"  # the shipped models' data: Bandai (NC) and CMU
+    assert joined_licence_tag(["open", "SA", "NC"]) == "NC,SA"  # with HDM05 (CC BY-SA): both travel
+    assert joined_licence_tag(["NC,SA", "SA"]) == "NC,SA" and joined_licence_tag(["open", "unknown"]) == "open"

@@ -17,6 +17,7 @@ from physmotion.conventions import FLOOR_JOINTS, FLOORS
 from physmotion.nets.denoiser import DenoiserConfig, build_denoiser
 from physmotion.diffusion.schedule import DiffusionConfig
 from physmotion.errors import PhysmotionError
+from physmotion.motion import joined_licence_tag
 from physmotion.paths import WEIGHTS_DIR
 from physmotion.features.normalize import Normalizer
 
@@ -36,8 +37,8 @@ class MotionDiffusion:
 
     @property
     def licence_tag(self) -> str:
-        """"NC" when any training clip was non-commercial, else "open"."""
-        return "NC" if "NC" in self.info.get("licence_tags", []) else "open"
+        """Every restriction of the training data's licences ("NC", "SA", or "NC,SA"), else "open"."""
+        return joined_licence_tag(self.info.get("licence_tags", []))
 
     @property
     def trained_max_length(self) -> int:

@@ -38,6 +38,7 @@ from physmotion.nets.denoiser import positional_encoding
 from physmotion.errors import PhysmotionError, ShapeError
 from physmotion.features.humanml3d import FEATURE_DIM
 from physmotion.features.normalize import Normalizer
+from physmotion.motion import joined_licence_tag
 from physmotion.paths import WEIGHTS_DIR
 from physmotion.text.encoder import DEFAULT_ENCODER, MINILM_DIM, TextFeatures, load_text_encoder
 
@@ -214,4 +215,5 @@ class Evaluator:
 
     @property
     def licence_tag(self) -> str:
-        return "NC" if "NC" in self.info.get("licence_tags", []) else "open"
+        """Every restriction of the training data's licences ("NC", "SA", or "NC,SA"), else "open"."""
+        return joined_licence_tag(self.info.get("licence_tags", []))

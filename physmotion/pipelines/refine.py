@@ -8,7 +8,7 @@ from dataclasses import asdict, dataclass, field
 from physmotion.conventions import FPS
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.refine import RefineConfig, check_motion, refine
-from physmotion.motion import Motion
+from physmotion.motion import Motion, joined_licence_tag
 
 
 @dataclass
@@ -32,8 +32,7 @@ class RefinePipeline:
         self.check(motion)
         joints = refine(self.model, motion.joints, motion.fps, self.config)
         # every restriction of the input's and of the model's data travels (NC, SA: joined "NC,SA")
-        tags = {t for t in motion.licence_tag.split(",") if t} | set(self.model.info.get("licence_tags", []))
-        licence = ",".join(sorted(tags - {"open", "unknown"})) or self.model.licence_tag
+        licence = joined_licence_tag([motion.licence_tag, self.model.licence_tag])
         texts = list(motion.texts) or ([self.config.text] if self.config.text else [])
         out = Motion(joints=joints, fps=FPS, texts=texts, licence_tag=licence, source=motion.source)
         return RefineResult(out, {"pipeline": type(self).__name__, "refine": asdict(self.config)})
