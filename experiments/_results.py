@@ -10,10 +10,11 @@ import platform
 import shlex
 import subprocess
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from datetime import datetime, timezone
 from pathlib import Path
 
+from physmotion.errors import PhysmotionError
 from physmotion.motion import write_atomic
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -59,6 +60,19 @@ def write_results(stem: str | Path, markdown: str, payload: dict) -> list[Path]:
     write_atomic(md, lambda f: f.write(markdown if markdown.endswith("\n") else markdown + "\n"), "w")
     write_atomic(js, lambda f: f.write(text), "w")
     return [md, js]
+
+
+def report(run: Callable[[], tuple[str, list[Path]]]) -> int:
+    """Run an experiment (``run`` returns its table and the files it wrote) and print both; a user's
+    error (:class:`PhysmotionError`, ``ValueError``) becomes one ``error:`` line. The exit status."""
+    try:
+        table, paths = run()
+    except (PhysmotionError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    print(table)
+    print("wrote " + ", ".join(map(str, paths)))
+    return 0
 
 
 def markdown_table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:

@@ -23,7 +23,7 @@ import json
 import sys
 from pathlib import Path
 
-from experiments._results import run_meta
+from experiments._results import report, run_meta
 from physmotion.checkpoint import weights_sha256
 from physmotion.diffusion.model import DEFAULT_MODEL_DIR, MotionDiffusion
 from physmotion.errors import PhysmotionError
@@ -119,19 +119,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--control", action="append", default=[], type=Path,
                         help="a model made by `morph finetune --mix 0` (repeatable)")
     args = parser.parse_args(argv)
-    try:
+
+    def run() -> tuple[str, list[Path]]:
         cfg = EvaluateConfig(split=args.split, repeats=args.repeats, seed=args.seed)
         parts = Path(f"{args.out}.parts")
         table = morph_table(args.data, args.run, args.base, cfg, Evaluator.load(args.evaluator), parts,
                             args.control)
         table.meta.update(run_meta(__file__, argv, {"post, physdiff": "sampling", "morph": "plain"}))
-        paths = table.write(args.out)
-    except PhysmotionError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
-    print(table.to_markdown())
-    print("wrote " + ", ".join(map(str, paths)))
-    return 0
+        return table.to_markdown(), table.write(args.out)
+
+    return report(run)
 
 
 if __name__ == "__main__":

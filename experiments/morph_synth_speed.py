@@ -1,7 +1,7 @@
 """Morph's synthetic data throughput: synthetic motions refined per second, and where the time goes.
 
 Usage: python -m experiments.morph_synth_speed [--model DIR] [--data data_build/mocap] [--captions 16]
-    [--per-caption 1] [--workers 0] [--steps 50] [--ilc 0] [--run RUN] [--out results/morph_synth_speed]
+    [--per-caption 1] [--workers 0] [--steps 50] [--ilc 0] [--run RUN] [--out STEM]
 Runs :func:`physmotion.morph.synth.synthesize` on the first ``--captions`` distinct train captions
 (lengths drawn from the train split, 50 DDIM steps, P with Morph's selection settings, ``--ilc`` passes of
 iterative learning control as `morph run --ilc`) into a temporary
@@ -61,9 +61,9 @@ def main(argv: list[str] | None = None) -> None:
     for row in _rounds(args.run) if args.run else []:  # a whole round: synthesis, then fine-tuning
         total = row["synth_seconds"] + row["finetune_seconds"]
         for stage, key in (("synthesis", "synth_seconds"), ("fine-tuning", "finetune_seconds")):
-            rows.append((f"round {row['round']}: {stage} ({row['synthetic_items']} motions, "
-                         f"{row['finetune_steps']} steps)", f"{row[key]:.0f}", f"{row[key] / total:.0%} of round",
-                         f"{row['synthetic_items'] / row[key]:.2f}"))  # fmt: skip
+            label = f"round {row['round']}: {stage} ({row['synthetic_items']} motions, {row['finetune_steps']} steps)"
+            rows.append((label, f"{row[key]:.0f}", f"{row[key] / total:.0%} of round",
+                         f"{row['synthetic_items'] / row[key]:.2f}"))
     md = f"# {title}\n\n" + markdown_table(("stage", "seconds", "share of wall", "motions / s"), rows) + "\n"
     print(md)
     figures = {"motions": report.done, "seconds": report.seconds, "sampling_seconds": report.sampling_seconds,

@@ -11,12 +11,11 @@ earliest timesteps first and kept consecutive at the end: N projections is the s
 from __future__ import annotations
 
 import argparse
-import sys
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 
-from experiments._results import run_meta
+from experiments._results import report, run_meta
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.errors import PhysmotionError
 from physmotion.eval.evaluator import Evaluator
@@ -102,23 +101,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--plot-only", action="store_true", help="redraw <out>.png from <out>.json")
     args = parser.parse_args(argv)
-    try:
+
+    def run() -> tuple[str, list[Path]]:
         if args.plot_only:
-            print("wrote", plot_study(EvalTable.from_json(f"{args.out}.json"), f"{args.out}.png"))
-            return 0
+            return "", [plot_study(EvalTable.from_json(f"{args.out}.json"), f"{args.out}.png")]
         counts = [int(c) for c in args.counts.split(",")]
         cfg = EvaluateConfig(split=args.split, repeats=args.repeats, max_motions=args.motions, seed=args.seed)
         cfg.base.sampler.steps = args.steps
         table = schedule_study(MotionDiffusion.load(args.model), Evaluator.load(args.evaluator), args.data,
                                counts, cfg)  # fmt: skip
         table.meta.update(run_meta(__file__, argv, "sampling"))  # EvaluateConfig's base: generation's P
-        paths = write_study(table, args.out)
-    except (PhysmotionError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
-    print(table.to_markdown())
-    print("wrote " + ", ".join(map(str, paths)))
-    return 0
+        return table.to_markdown(), write_study(table, args.out)
+
+    return report(run)
 
 
 if __name__ == "__main__":
