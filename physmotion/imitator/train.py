@@ -197,7 +197,7 @@ def _iteration(alg, env: VecImitationEnv, cfg: ImitatorTrainConfig, state: dict,
             obs, rew, dones = obs.to(alg.device), rew.to(alg.device), dones.to(alg.device)
             alg.process_env_step(obs, rew, dones, extras)
             rewards += float(rew.mean())
-            ends.extend(env.last_ends)
+            ends.extend(extras["episode_ends"])
         alg.compute_returns(obs)
     losses = alg.update()
     fails = state["fails"]

@@ -123,8 +123,8 @@ class VecImitationEnv:
         dones = np.concatenate(term) | np.concatenate(trunc)
         self.episode_length_buf += 1
         self.episode_length_buf[torch.from_numpy(dones)] = 0
-        self.last_ends = ends
-        extras = {"time_outs": torch.from_numpy(np.concatenate(trunc)).float(), "log": {}}
+        # episode_ends: ours, the episodes that ended at this step (rsl-rl reads only time_outs and log)
+        extras = {"time_outs": torch.from_numpy(np.concatenate(trunc)).float(), "log": {}, "episode_ends": ends}
         return self.get_observations(), torch.from_numpy(np.concatenate(rew)).float(), \
             torch.from_numpy(dones).long(), extras  # fmt: skip
 
@@ -138,7 +138,6 @@ class VecImitationEnv:
             pipe.send(("reset", (seed, self.weights, self.curriculum)))
         self._obs = torch.from_numpy(np.concatenate([_recv(p) for p in self._pipes]))
         self.episode_length_buf.zero_()
-        self.last_ends: list[EpisodeEnd] = []
         return self._obs
 
     def evaluate(self, weights: dict[str, np.ndarray], settings, cap: float) -> list[dict]:
