@@ -82,7 +82,7 @@ def markdown_table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> s
     return "\n".join(lines)
 
 
-def _finite(value):
+def _finite(value: object) -> object:
     """``value`` with every NaN or infinite float (nested in dicts, lists and tuples) replaced by None."""
     if isinstance(value, float):
         return value if math.isfinite(value) else None
