@@ -40,9 +40,9 @@ from dataclasses import replace
 import mujoco
 
 from experiments._results import markdown_table, run_meta, write_results
+from experiments.prompts import PHYSICS_PROMPTS
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.samplers import default_sampler
-from physmotion.eval.prompts import PHYSICS_PROMPTS
 from physmotion.generate import GenerateConfig, generate
 from physmotion.physics.presets import preset
 

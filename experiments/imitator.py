@@ -4,7 +4,7 @@ Usage: python -m experiments.imitator generated [--seeds 0,1,2] [--categories ru
        python -m experiments.imitator captured [--mocap ../shared/data/mocap,../shared/data/hdm05] [--limit N]
        (either with --policy DIR; default: the shipped one; --out results/imitator_<part>)
 
-generated: the unseen prompts (``eval.prompts.NEW_PROMPTS``) of the fast categories, 6 s each, PhysDiff's
+generated: the unseen prompts (``experiments.prompts.NEW_PROMPTS``) of the fast categories, 6 s each, PhysDiff's
 default schedule with P driven by the tracker and by the policy, against the same seed's ``none+floor``.
 Per output: Phys-Err (mm) and whether it is below ``none+floor``'s, the projection's resets, the root
 residual force (fractions of body weight W) and torque (W x 1 m) of the last projection, and that
@@ -66,8 +66,8 @@ def _phys(joints: np.ndarray, body) -> dict[str, float]:
 
 
 def generated(args: argparse.Namespace, argv: list[str] | None = None) -> tuple[list[dict], dict]:
+    from experiments.prompts import NEW_PROMPTS
     from physmotion.diffusion.model import MotionDiffusion
-    from physmotion.eval.prompts import NEW_PROMPTS
     from physmotion.generate import GenerateConfig, generate
 
     model = MotionDiffusion.load(args.model)

@@ -31,10 +31,10 @@ from dataclasses import replace
 import numpy as np
 
 from experiments._results import markdown_table, run_meta, write_results
+from experiments.prompts import NEW_PROMPTS, PHYSICS_PROMPTS
 from physmotion.conventions import FPS
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.eval.physics_columns import imitation_columns, metric_surface, reset_columns
-from physmotion.eval.prompts import NEW_PROMPTS, PHYSICS_PROMPTS
 from physmotion.generate import GenerateConfig, generate
 from physmotion.metrics import physical_metrics
 from physmotion.physics.presets import preset

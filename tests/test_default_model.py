@@ -89,7 +89,7 @@ def test_physics_modes_match_the_recorded_bench(model: MotionDiffusion) -> None:
     (tests/test_results.py). Generation is deterministic; the margin allows another CPU's rounding in
     the simulation. PhysDiff must beat the grounded baseline and post-processing, not only ``none``."""
     from experiments.physdiff_quality import compare_modes
-    from physmotion.eval.prompts import PHYSICS_PROMPTS
+    from experiments.prompts import PHYSICS_PROMPTS
 
     recorded = json.loads((Path(__file__).parents[1] / "results" / "physdiff_quality.json").read_text())
     assert recorded["meta"]["seeds"][0] == 0 and recorded["meta"]["prompts"] == len(PHYSICS_PROMPTS)

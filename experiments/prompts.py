@@ -1,4 +1,4 @@
-"""Fixed prompt sets for evaluations and benchmarks.
+"""Fixed prompt sets for the experiments (physdiff_quality, generate_speed, imitator).
 
 ``PHYSICS_PROMPTS``: 32 captions in the words of our data's captions (Bandai and CMU), covering
 locomotion, gestures and whole-body actions, used to compare --physics none / post / physdiff.
@@ -40,7 +40,7 @@ PHYSICS_PROMPTS: tuple[str, ...] = (
 )
 
 # Prompts written from scratch for the unseen-prompt benchmark (Morph and the dynamic-motion projection):
-# none is a train caption (tests/eval/test_prompts.py checks), each category has at least 4, and runs and
+# none is a train caption (tests/experiments/test_prompts.py checks), each category has at least 4, and runs and
 # jumps are categories of their own so that their rows can be read alone.
 NEW_PROMPTS: dict[str, tuple[str, ...]] = {
     "run": ("someone sprints straight ahead", "a man runs quickly across the room",

@@ -2,8 +2,8 @@
 
 from pathlib import Path
 
+from experiments.prompts import NEW_PROMPTS
 from physmotion.data.dataset import read_captions, read_split
-from physmotion.eval.prompts import NEW_PROMPTS
 
 
 def test_new_prompts_are_no_caption_of_the_data(built_dir: Path) -> None:
