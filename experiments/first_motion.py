@@ -187,8 +187,8 @@ def _acceptance(stats: dict[str, dict[str, float]], n: int) -> list[str]:
              f"- argument error: {cell('cold CLI: argument error (--seconds 20)')} (issue: at most 0.5 s)",
              f"- --help: {cell('cold CLI: physmotion --help')} (issue: at most 0.3 s)",
              f"- warm plain motion: {cell(BASELINE)} (issue: at most 0.2 s)",
-             f"- served plain motion, at the client: {cell('served: POST, none, batch 1')} (issue: shown in the "
-             "browser within 2 s; tests/test_serve.py times the page)"]  # fmt: skip
+             (f"- served plain motion, at the client: {cell('served: POST, none, batch 1')} (issue: shown in the "
+              "browser within 2 s; tests/test_serve.py times the page)")]  # fmt: skip
     plain, phys = stats.get(BASELINE), stats.get("warm library: generate(), physdiff, batch 1")
     if plain and phys:
         lines.append(f"- PhysDiff / plain, warm: {phys['median'] / plain['median']:.2f} (issue: at most 1.5)")

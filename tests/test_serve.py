@@ -21,15 +21,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("fastapi", reason="the 'serve' extra (in dev) is not installed")
+from fastapi.testclient import TestClient
 
-from fastapi.testclient import TestClient  # noqa: E402
-
-from physmotion.diffusion.model import MotionDiffusion  # noqa: E402
-from physmotion.generate import GenerateConfig, generate  # noqa: E402
-from physmotion.motion import Motion  # noqa: E402
-from physmotion.serve import ServeConfig, bind, make_app, url_of  # noqa: E402
-from tests.cli_runner import invoke  # noqa: E402
+from physmotion.diffusion.model import MotionDiffusion
+from physmotion.generate import GenerateConfig, generate
+from physmotion.motion import Motion
+from physmotion.serve import ServeConfig, bind, make_app, url_of
+from tests.cli_runner import invoke
 
 WALK = "a person walks forward"
 QUICK = {"physics": "none", "seconds": 2.0}  # the shortest motion, no simulation: a fraction of a second
@@ -180,7 +178,7 @@ class _ThreadServer:
         self.server = uvicorn.Server(uvicorn.Config(app, log_level="warning"))
         self.thread = threading.Thread(target=self.server.run, kwargs={"sockets": [self.sock]}, daemon=True)
 
-    def __enter__(self) -> _ThreadServer:
+    def __enter__(self) -> _ThreadServer:  # noqa: PYI034
         self.thread.start()
         deadline = time.monotonic() + 30
         while not self.server.started:
@@ -207,10 +205,10 @@ def _figure(pixels: np.ndarray) -> np.ndarray:
 
 @pytest.mark.slow  # headless Chromium (installed by `make test`), the shipped model, 6 s motions
 def test_page_end_to_end_in_headless_chromium(net: MotionDiffusion, capsys: pytest.CaptureFixture) -> None:
-    sync_api = pytest.importorskip("playwright.sync_api")
+    from playwright.sync_api import sync_playwright  # the dev extra's
     if not Path(CHROMIUM).exists():
         pytest.fail("chromium is not installed: `make browser` installs it")
-    with _ThreadServer(make_app(net, ServeConfig(physics="none"))) as srv, sync_api.sync_playwright() as pw:
+    with _ThreadServer(make_app(net, ServeConfig(physics="none"))) as srv, sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_FLAGS)
         page = browser.new_page(viewport={"width": 1000, "height": 700})
         outside: list[str] = []

@@ -23,6 +23,7 @@ Routes:
 from __future__ import annotations
 
 import asyncio
+import functools
 import itertools
 import re
 import socket
@@ -36,7 +37,7 @@ from contextlib import asynccontextmanager
 from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
 from fastapi import FastAPI
@@ -49,7 +50,10 @@ from physmotion.conventions import FPS, MIN_FRAMES
 from physmotion.errors import PhysmotionError
 from physmotion.motion import Motion
 
-# The physics modes the page offers (any spelling of physmotion/physics_mode.py is accepted by the API).
+if TYPE_CHECKING:
+    from physmotion.diffusion.model import MotionDiffusion
+
+# The physics modes the page offers (the API takes any spelling `generate --physics` takes).
 PAGE_MODES = ("none", "none+floor", "post:1", "physdiff", "morph")
 _WARMUP_TEXT = "a person walks forward"
 # /assets/NAME -> the file of physmotion/viewer/ that the served viewer pages link instead of inlining
@@ -137,11 +141,12 @@ def _validation_message(errors: list[dict]) -> str:
     return f"{where}: {first.get('msg', 'invalid')}"
 
 
-def make_app(model: Any = None, config: ServeConfig | None = None,
-             log: Callable[[str], None] | None = None):  # fmt: skip
+def make_app(model: MotionDiffusion | str | Path | None = None, config: ServeConfig | None = None,
+             log: Callable[[str], None] | None = None) -> FastAPI:  # fmt: skip
     """The served app (a FastAPI instance) around one warm model.
 
-    model: a loaded ``MotionDiffusion``, a model folder, or None (the shipped default model). log: called with one line per generated motion and at startup (None: silent).
+    model: a loaded ``MotionDiffusion``, a model folder, or None (the shipped default model).
+    log: called with one line per generated motion and at startup (None: silent).
     """
     from physmotion.diffusion.model import MotionDiffusion
     from physmotion.diffusion.samplers import default_sampler
@@ -231,9 +236,10 @@ def make_app(model: Any = None, config: ServeConfig | None = None,
         return {"status": "ok", "model": name, "busy": worker.pending > 0, "waiting": max(worker.pending - 1, 0)}
 
     @app.post("/api/generate")
-    async def generate_route(req: GenerateRequest):
+    async def generate_route(req: GenerateRequest) -> JSONResponse:
         gen = check(req)
-        future = worker.submit(lambda queued=time.perf_counter(): run(req, gen, queued))
+        queued = time.perf_counter()
+        future = worker.submit(lambda: run(req, gen, queued))
         if future is None:
             return _error(503, f"busy: one motion is being made and {worker.limit - 1} wait; try again in a "
                           "moment", headers={"Retry-After": "1"})  # fmt: skip
@@ -246,7 +252,7 @@ def make_app(model: Any = None, config: ServeConfig | None = None,
         mid = keep(served)
         say(f"{mid}: {req.text.strip()!r} ({served.request['physics']}, {served.motion.num_frames / FPS:g} s, "
             f"seed {req.seed}) in {served.generate_s:.2f} s")  # fmt: skip
-        return _answer(mid, served)
+        return JSONResponse(_answer(mid, served))
 
     @app.get("/api/motions/{mid}.npz")
     def download_npz(mid: str) -> Response:
@@ -275,6 +281,7 @@ def make_app(model: Any = None, config: ServeConfig | None = None,
     return app
 
 
+@functools.cache
 def _viewer_asset(name: str) -> str:
     """A file of physmotion/viewer/ (its script, the vendored three.js) as text."""
     return resources.files("physmotion.viewer").joinpath(name).read_text(encoding="utf-8")
