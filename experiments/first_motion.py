@@ -1,7 +1,7 @@
 """The first motion as a user meets it (issue 51): cold command line, warm library, served request; one table.
 
 Usage: python -m experiments.first_motion [--runs 3] [--prompts 16] [--seconds 6] [--modes none,physdiff,morph]
-       [--cold-cache] [--out results/first_motion]
+       [--threads N] [--cold-cache] [--out results/first_motion]
 
 Every row is timed by wall clock, min and median over ``--runs`` rounds; the rounds interleave the rows,
 so a slow spell of the shared machine hits all of them alike. Three ways in, each for every physics mode
@@ -20,7 +20,10 @@ The ratio column is each row's median over this run's baseline, the warm library
 (``generate()``, ``none``, batch 1): compare ratios within a run, the machine's speed drifts between
 runs. The last lines check the issue's acceptance figures that this table holds. Prompt features come
 from a cache folder of this run, filled by an untimed warm-up (``--cold-cache``: a fresh, empty cache
-for every cold process instead). Writes ``<out>.md`` and ``<out>.json`` (with a ``meta`` block).
+for every cold process instead). ``--threads 1`` sets ``OMP_NUM_THREADS=1`` in every process: on a 2-core
+machine shared with other work, torch's two threads can make sampling several times slower
+(docs/decisions/tools.md). Writes ``<out>.md`` and ``<out>.json`` (with a ``meta`` block) after every
+round, so an interrupted run keeps the rounds it finished.
 """
 
 from __future__ import annotations
@@ -205,12 +208,16 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seconds", type=float, default=6.0, help="length of every motion")
     parser.add_argument("--modes", default="none,physdiff,morph", help="physics modes, comma-separated")
     parser.add_argument("--cold-cache", action="store_true", help="an empty prompt cache for every cold process")
+    parser.add_argument("--threads", type=int, default=0,
+                        help="torch threads in every process (OMP_NUM_THREADS; 0: torch's default)")
     parser.add_argument("--out", default="results/first_motion", help="writes OUT.md and OUT.json")
     args = parser.parse_args(argv)
     args.modes = [m.strip() for m in args.modes.split(",") if m.strip()]
     args.prompts = max(1, min(args.prompts, len(PROMPTS)))
     work = Path(tempfile.mkdtemp(prefix="first_motion-"))
     os.environ["PHYSMOTION_CACHE_DIR"] = str(work / "cache")  # this process's generate() and every child's
+    if args.threads:  # before torch is imported here; the children inherit it
+        os.environ["OMP_NUM_THREADS"] = str(args.threads)
     env = dict(os.environ)
     rows, stop = _rows(args, work, env)
     try:
@@ -218,25 +225,30 @@ def main(argv: list[str] | None = None) -> None:
             for row in rows:
                 row.times.append(row.run())
                 print(f"  round {run + 1}: {row.label}: {row.times[-1]:.2f} s", file=sys.stderr, flush=True)
+            _write(args, argv, rows, run + 1)  # a round at a time: an interrupted run keeps what it measured
     finally:
         stop()
+
+
+def _write(args: argparse.Namespace, argv: list[str] | None, rows: list[Row], rounds: int) -> None:
+    """Print the table and write ``args.out``'s .md and .json, from the ``rounds`` rounds done."""
     stats = {r.label: {"min": min(r.times), "median": statistics.median(r.times), "times": r.times} for r in rows}
     base = stats[BASELINE]["median"]
     load = os.getloadavg()
+    threads = os.environ.get("OMP_NUM_THREADS", "torch's default")
     title = (f"first motion: cold CLI, warm library, served; {args.seconds:g} s motions, the default model and "
-             f"sampler; {cpu_model()}, {os.cpu_count()} cores; {args.runs} rounds; load average at the end "
-             f"{load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} (1 / 5 / 15 min)")  # fmt: skip
+             f"sampler; {cpu_model()}, {os.cpu_count()} cores, torch threads: {threads}; {rounds} round(s); load "
+             f"average at the end {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} (1 / 5 / 15 min)")  # fmt: skip
     table = markdown_table(("row", "min s", "median s", "x baseline (median)"),
                            [(label, f"{s['min']:.2f}", f"{s['median']:.2f}", f"{s['median'] / base:.3g}")
                             for label, s in stats.items()])  # fmt: skip
     md = (f"# {title}\n\nBaseline: {BASELINE} ({base:.2f} s median).\n\n{table}\n\nAcceptance lines of issue 51 "
           "this run measures (medians):\n\n" + "\n".join(_acceptance(stats, args.prompts)) + "\n")
-    print(md)
-    meta = run_meta(__file__, argv, {"physdiff": "sampling", "morph": "plain"}, runs=args.runs, prompts=args.prompts, seconds=args.seconds,
-                    modes=args.modes, cold_cache=args.cold_cache, cores=os.cpu_count(),
-                    load_average=[round(x, 2) for x in load])  # fmt: skip
+    print(md, flush=True)
+    meta = run_meta(__file__, argv, {"physdiff": "sampling", "morph": "plain"}, runs=args.runs, rounds_done=rounds,
+                    prompts=args.prompts, seconds=args.seconds, modes=args.modes, cold_cache=args.cold_cache,
+                    cores=os.cpu_count(), torch_threads=threads, load_average=[round(x, 2) for x in load])  # fmt: skip
     write_results(args.out, md, {"meta": meta, "baseline": BASELINE, "seconds": stats})
-
 
 if __name__ == "__main__":
     main()
