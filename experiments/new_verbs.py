@@ -61,8 +61,10 @@ def main(argv: list[str] | None = None) -> int:
                 for m, verbs in figures.items() for verb, f in verbs.items()]  # fmt: skip
         table = markdown_table(["model", "verb", "figure", "threshold", "share passing", "median"], rows)
         n = args.seeds * len(next(iter(PROMPTS.values())))
-        md = (f"Plain sampling (`none`), {args.seconds:g} s, {n} motions per verb ({args.seeds} seeds x 3 prompts: "
-              f"the HDM05 caption and two paraphrases).\n\n{table}\n")
+        md = (
+            f"Plain sampling (`none`), {args.seconds:g} s, {n} motions per verb ({args.seeds} seeds x 3 prompts: "
+            f"the HDM05 caption and two paraphrases).\n\n{table}\n"
+        )
         meta = run_meta(__file__, argv, None, seeds=args.seeds, seconds=args.seconds, prompts=PROMPTS)
         return table, write_results(args.out, md, {"meta": meta, "models": figures})
 

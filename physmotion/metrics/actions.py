@@ -71,6 +71,8 @@ def _down_and_up(joints: np.ndarray) -> float:
 ACTION_CHECKS: dict[str, ActionCheck] = {
     "squat": ActionCheck("squat", "pelvis down and back up, m (the smaller of the two)", _down_and_up, 0.25),
     "kick": ActionCheck("kick", "highest foot over knee height, m", kick_height, 0.0),
-    "lie down": ActionCheck("lie down", "pelvis height at the end, m", final_pelvis_height, 0.35, above=False),
+    "lie down": ActionCheck(
+        "lie down", "pelvis height at the end, m", final_pelvis_height, 0.35, above=False
+    ),
     "hop": ActionCheck("hop", "both feet off the floor at once, m", flight_height, 0.03),
 }

@@ -73,7 +73,8 @@ class Pipeline:
         feats = self.model.normalizer.denormalize(x.float().cpu().numpy())
         feats = [f[:n] for f, n in zip(feats, lengths)]
         joints = [recover_from_ric(f.astype(np.float64)) for f in feats]
-        done = last or self._after(joints, log, (lambda k: on_step(self.sampler.steps + k, total)) if on_step else None)
+        after = (lambda k: on_step(self.sampler.steps + k, total)) if on_step else None
+        done = self._after(joints, log, after) if last is None else last
         motions = [
             Motion(joints=j, fps=FPS, texts=[p], licence_tag=self.model.licence_tag,
                    source=f"physmotion generate ({self.name})", humanoid=b,

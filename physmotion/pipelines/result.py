@@ -23,7 +23,9 @@ class GenerateResult:
     # per motion: its length in frames and where it came from, "given" or "predicted" (from the text)
     lengths: list[int] = field(default_factory=list)
     length_source: list[str] = field(default_factory=list)
-    settings: dict = field(default_factory=dict)  # the pipeline, its sampler and P's settings (Pipeline.settings)
+    settings: dict = field(
+        default_factory=dict
+    )  # the pipeline, its sampler and P's settings (Pipeline.settings)
 
     @property
     def bodies(self) -> list[np.ndarray | None]:

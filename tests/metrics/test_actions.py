@@ -11,7 +11,12 @@ import pytest
 from physmotion.io import import_clip, load_manifest
 from physmotion.metrics.actions import ACTION_CHECKS, squat_depth
 
-CLIPS = {"squat": "squat1Reps", "kick": "kickLFront1Reps", "lie down": "lieDownFloor", "hop": "hopBothLegs1hops"}
+CLIPS = {
+    "squat": "squat1Reps",
+    "kick": "kickLFront1Reps",
+    "lie down": "lieDownFloor",
+    "hop": "hopBothLegs1hops",
+}
 
 
 @pytest.fixture(scope="module")

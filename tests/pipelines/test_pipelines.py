@@ -34,7 +34,9 @@ def test_pipeline_for_picks_one_class_per_method(model: MotionDiffusion) -> None
               "physdiff:end:2,space:1": PhysDiffPipeline, "morph": MorphPipeline}  # fmt: skip
     for spelling, cls in expect.items():
         pipeline = pipeline_for(GenerateConfig(physics=spelling, sampler=FEW), model)
-        assert type(pipeline) is cls and pipeline.name == spelling and pipeline.settings()["physics"] == spelling
+        assert (
+            type(pipeline) is cls and pipeline.name == spelling and pipeline.settings()["physics"] == spelling
+        )
 
 
 def test_physdiff_returns_its_projections_in_the_prompts_order(model: MotionDiffusion) -> None:
@@ -71,7 +73,9 @@ def test_morph_marks_each_kept_input_on_its_own_motion(model: MotionDiffusion) -
 def test_plain_and_floor_differ_by_a_height_only(model: MotionDiffusion) -> None:
     plain = PlainPipeline(model, FEW)(PROMPTS[:2], LENGTHS[:2], seed=3)
     floor = FloorPipeline(model, FEW)(PROMPTS[:2], LENGTHS[:2], seed=3)
-    assert plain.projections.calls == 0 and all(m.humanoid is None and m.resets is None for m in plain.motions)
+    assert plain.projections.calls == 0 and all(
+        m.humanoid is None and m.resets is None for m in plain.motions
+    )
     for a, b in zip(plain.motions, floor.motions):
         shift = b.joints - a.joints
         assert b.humanoid is not None and np.allclose(shift[..., [0, 2]], 0) and np.ptp(shift[..., 1]) < 1e-5
