@@ -857,6 +857,8 @@ def serve_cmd(
                                 "(any of generate's; a request may name another)."),
     waiting: int = typer.Option(4, help="Requests that may wait behind the one being generated; past that the "
                                 "server answers 503 (busy) at once."),
+    steps: int | None = typer.Option(None, help="Sampling steps, as generate's --steps: fewer answer sooner "
+                                     "(default: the model's sampler's, 50 DDIM steps for the shipped models)."),
 ) -> None:
     """A local web app that keeps the model warm: type a prompt, watch the motion, download it; and a JSON
     endpoint for scripts (POST /api/generate)."""
@@ -867,7 +869,7 @@ def serve_cmd(
                               "pip install 'physmotion[serve]'") from None
     check_physics(physics)
     sock = bind(host, port)
-    app_ = make_app(_model_dir(model), ServeConfig(physics=physics, waiting=waiting),
+    app_ = make_app(_model_dir(model), ServeConfig(physics=physics, waiting=waiting, steps=steps),
                     log=lambda line: console.print(line, highlight=False))
     if host not in ("127.0.0.1", "localhost", "::1"):
         _warn(f"listening on {host}: other machines can reach this server")

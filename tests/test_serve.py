@@ -20,7 +20,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from fastapi.testclient import TestClient
 
 from physmotion.diffusion.model import MotionDiffusion
@@ -151,6 +150,17 @@ def test_busy_server_refuses_with_503_and_answers_every_request(net: MotionDiffu
         assert busy.json()["error"].startswith("busy:") and busy.headers["retry-after"] == "1"
         assert c.get("/api/health").json()["busy"] is False  # every admitted request finished
         assert c.post("/api/generate", json={"text": WALK}).status_code == 200  # and it takes new ones
+
+
+def test_steps_as_generate_takes_them(net: MotionDiffusion) -> None:
+    from dataclasses import replace
+
+    from physmotion.diffusion.samplers import default_sampler
+
+    with TestClient(make_app(net, ServeConfig(physics="none", seconds=2.0, steps=10, warmup=False))) as c:
+        got = np.array(c.post("/api/generate", json={"text": WALK, "seed": 1}).json()["joints"])
+    config = GenerateConfig(seconds=2.0, physics="none", seed=1, sampler=replace(default_sampler(net), steps=10))
+    np.testing.assert_allclose(got, generate([WALK], config, net).motions[0].joints, atol=5.1e-5)
 
 
 def test_serve_refuses_bad_options_before_loading_the_model() -> None:

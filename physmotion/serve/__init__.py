@@ -64,11 +64,12 @@ _ASSETS = {"three-bundle.min.js": "vendor/three-bundle.min.js", "viewer.js": "vi
 class ServeConfig:
     """Options of a served app. ``physics`` and ``seconds`` are the defaults of a request (and the page's
     first choice); ``waiting``: requests that may wait behind the running one before 503; ``keep``: motions
-    kept for download; ``max_projections``: a request whose physics mode runs P more often is refused
+    kept for download; ``steps``: sampling steps (None: the model's); ``max_projections``: a request whose physics mode runs P more often is refused
     (``post:50`` would hold the worker for minutes); ``warmup``: make one short motion at startup."""
 
     physics: str = "physdiff"  # generate's default: a served motion is `physmotion generate`'s
     seconds: float | None = 6.0
+    steps: int | None = None  # sampling steps; None: the model's sampler's (as `generate --steps`)
     waiting: int = 4
     keep: int = 32
     max_text: int = 500
@@ -157,7 +158,8 @@ def make_app(model: MotionDiffusion | str | Path | None = None, config: ServeCon
     started = time.perf_counter()
     net = model if isinstance(model, MotionDiffusion) else MotionDiffusion.load(model)
     name = "default" if model is None else str(model) if isinstance(model, (str, Path)) else "in-process"
-    sampler = default_sampler(net)
+    sampler = default_sampler(net) if cfg.steps is None else replace(default_sampler(net), steps=cfg.steps)
+    sampler.check()
     lo, hi = MIN_FRAMES / FPS, net.denoiser.max_frames / FPS
     worker = _Worker(limit=1 + max(cfg.waiting, 0))
     motions: OrderedDict[str, _Served] = OrderedDict()
