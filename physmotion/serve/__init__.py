@@ -199,10 +199,11 @@ def make_app(model: MotionDiffusion | str | Path | None = None, config: ServeCon
             motions.popitem(last=False)
         return mid
 
-    def find(mid: str) -> _Served:
-        if mid not in motions:
+    def find(mid: str) -> _Served:  # one read: another thread may drop the oldest motion meanwhile
+        served = motions.get(mid)
+        if served is None:
             raise HTTPException(404, f"no motion {mid!r}: this server keeps its last {cfg.keep} motions")
-        return motions[mid]
+        return served
 
     if cfg.warmup:  # the text encoder, torch's kernels and the prompt cache, before the first user
         generate([_WARMUP_TEXT], GenerateConfig(seconds=lo, physics="none", sampler=sampler), net)
