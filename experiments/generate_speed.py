@@ -42,7 +42,7 @@ import mujoco
 from experiments._results import markdown_table, run_meta, write_results
 from experiments.prompts import PHYSICS_PROMPTS
 from physmotion.diffusion.model import MotionDiffusion
-from physmotion.diffusion.samplers import default_sampler
+from physmotion.diffusion.samplers import ddim_50, default_sampler
 from physmotion.generate import GenerateConfig, generate
 from physmotion.physics.presets import preset
 
@@ -83,7 +83,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--out", default="results/generate_speed", help="writes OUT.md and OUT.json")
     args = parser.parse_args(argv)
     model = MotionDiffusion.load(args.model)
-    base = GenerateConfig(seconds=args.seconds, projection=preset("sampling"), morph_projection=preset("plain"))
+    base = GenerateConfig(seconds=args.seconds, sampler=ddim_50(), projection=preset("sampling"),
+                          morph_projection=preset("plain"))  # fmt: skip
     generate(PHYSICS_PROMPTS[:1], replace(base, physics="none"), model)  # warm-up: encoder load, first calls
     runs = {mode: (model, replace(base, physics=mode)) for mode in MODES}
     runs[f"{PHYSDIFF} at 1/720 s"] = (model, replace(base, physics=PHYSDIFF, projection=preset("sampling_fine")))

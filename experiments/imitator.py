@@ -68,6 +68,7 @@ def _phys(joints: np.ndarray, body) -> dict[str, float]:
 def generated(args: argparse.Namespace, argv: list[str] | None = None) -> tuple[list[dict], dict]:
     from experiments.prompts import NEW_PROMPTS
     from physmotion.diffusion.model import MotionDiffusion
+    from physmotion.diffusion.samplers import ddim_50
     from physmotion.generate import GenerateConfig, generate
 
     model = MotionDiffusion.load(args.model)
@@ -75,7 +76,7 @@ def generated(args: argparse.Namespace, argv: list[str] | None = None) -> tuple[
     for cat in args.categories.split(","):
         prompts = list(NEW_PROMPTS[cat])
         for seed in [int(s) for s in args.seeds.split(",")]:
-            base = GenerateConfig(seed=seed, projection=preset("sampling"))
+            base = GenerateConfig(seed=seed, sampler=ddim_50(), projection=preset("sampling"))
             floor = generate(prompts, replace(base, physics="none+floor"), model)
             outs = {}
             for ctrl in CONTROLLERS:

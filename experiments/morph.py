@@ -26,9 +26,11 @@ from pathlib import Path
 from experiments._results import report, run_meta
 from physmotion.checkpoint import weights_sha256
 from physmotion.diffusion.model import DEFAULT_MODEL_DIR, MotionDiffusion
+from physmotion.diffusion.samplers import ddim_50
 from physmotion.errors import PhysmotionError
 from physmotion.eval.evaluator import Evaluator
 from physmotion.eval.table import REAL, EvalTable, EvaluateConfig, evaluate
+from physmotion.generate import GenerateConfig
 from physmotion.morph.loop import read_rounds
 from physmotion.pipelines.modes import parse_modes
 
@@ -121,7 +123,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     def run() -> tuple[str, list[Path]]:
-        cfg = EvaluateConfig(split=args.split, repeats=args.repeats, seed=args.seed)
+        cfg = EvaluateConfig(split=args.split, repeats=args.repeats, seed=args.seed,
+                             base=GenerateConfig(sampler=ddim_50()))  # the schedules of MODES are DDIM 50's
         parts = Path(f"{args.out}.parts")
         table = morph_table(args.data, args.run, args.base, cfg, Evaluator.load(args.evaluator), parts,
                             args.control)

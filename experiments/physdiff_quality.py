@@ -34,6 +34,7 @@ from experiments._results import markdown_table, run_meta, write_results
 from experiments.prompts import NEW_PROMPTS, PHYSICS_PROMPTS
 from physmotion.conventions import FPS
 from physmotion.diffusion.model import MotionDiffusion
+from physmotion.diffusion.samplers import ddim_50
 from physmotion.eval.physics_columns import imitation_columns, metric_surface, reset_columns
 from physmotion.generate import GenerateConfig, generate
 from physmotion.metrics import physical_metrics
@@ -59,7 +60,7 @@ def compare_modes(
 
     surface "humanoid": the humanoid's geometry, with the body P simulated for projected outputs and one
     estimated from the joints otherwise; "joints": the joint-only surface model."""
-    base = base or GenerateConfig()
+    base = base or GenerateConfig(sampler=ddim_50())
     metric_surface(surface)  # a bad name fails before any work
     results: dict[str, dict[str, float]] = {}
     for mode in [PhysicsMode.parse(m) for m in modes]:
@@ -95,7 +96,8 @@ def main(argv: list[str] | None = None) -> None:
     model = MotionDiffusion.load(args.model)
     presets = {"physdiff, post": "sampling_fine" if args.fine_step else "sampling",
                "morph": "fine" if args.fine_step else "plain"}  # fmt: skip
-    base = GenerateConfig(projection=preset(presets["physdiff, post"]), morph_projection=preset(presets["morph"]))
+    base = GenerateConfig(sampler=ddim_50(), projection=preset(presets["physdiff, post"]),
+                          morph_projection=preset(presets["morph"]))  # fmt: skip
     if args.tau is not None:
         base = replace(base, projection=replace(base.projection, tau=args.tau))
     run = _new_prompts if args.set == "new" else _physics_prompts

@@ -17,9 +17,11 @@ from pathlib import Path
 
 from experiments._results import report, run_meta
 from physmotion.diffusion.model import MotionDiffusion
+from physmotion.diffusion.samplers import ddim_50
 from physmotion.errors import PhysmotionError
 from physmotion.eval.evaluator import Evaluator
 from physmotion.eval.table import EvalTable, EvaluateConfig, evaluate
+from physmotion.generate import GenerateConfig
 from physmotion.motion import write_atomic
 
 DEFAULT_COUNTS = (0, 1, 2, 4, 8, 20, 50)
@@ -40,7 +42,7 @@ def schedule_study(
     on_progress: Callable[[int, int], None] | None = None,
 ) -> EvalTable:
     """One table row per projection count (rows named by the count), plus the real-data row."""
-    cfg = config or EvaluateConfig(repeats=1)
+    cfg = config or EvaluateConfig(repeats=1, base=GenerateConfig(sampler=ddim_50()))
     steps = cfg.base.sampler.steps
     if not counts or any(not 0 <= n <= steps for n in counts):
         raise PhysmotionError(f"projection counts must lie in 0..{steps} (the sampling steps), got {list(counts)}")
@@ -106,7 +108,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.plot_only:
             return "", [plot_study(EvalTable.from_json(f"{args.out}.json"), f"{args.out}.png")]
         counts = [int(c) for c in args.counts.split(",")]
-        cfg = EvaluateConfig(split=args.split, repeats=args.repeats, max_motions=args.motions, seed=args.seed)
+        cfg = EvaluateConfig(split=args.split, repeats=args.repeats, max_motions=args.motions, seed=args.seed,
+                             base=GenerateConfig(sampler=ddim_50()))  # fmt: skip
         cfg.base.sampler.steps = args.steps
         table = schedule_study(MotionDiffusion.load(args.model), Evaluator.load(args.evaluator), args.data,
                                counts, cfg)  # fmt: skip

@@ -37,7 +37,7 @@ app.add_typer(data_app, name="data")
 console = Console(soft_wrap=True)
 OVERWRITE_HELP = "Replace existing output instead of refusing."
 SAMPLER_HELP = ("ddim, ddpm, dpmpp (DPM-Solver++ 2M, Karras) or dpmpp-sde (its SDE variant; a BioMoDiffuse "
-                "model's default, with 10 steps) (default: ddim).")
+                "model's default, with 10 steps) (default: dpmpp).")
 ETA_HELP = "DDIM eta: 0 deterministic, 1 ancestral (DDPM-like) (default: 0)."
 CFG_HELP = "Classifier-free guidance scale (default: 2.5)."
 
@@ -427,11 +427,11 @@ def generate_cmd(
         "shift can), post[:K] (K projections after sampling), physdiff[:SCHEDULE] (projection "
         "inside sampling; SCHEDULE uniform:N, start:M,end:N or end:N,space:S) or morph (one projection "
         "after sampling that keeps the sampled motion where the humanoid fails to imitate it, Morph's "
-        "inference) (default: physdiff:end:4,space:1)."),
+        "inference) (default: physdiff:end:2,space:1)."),
     num: int | None = typer.Option(None, help="Samples per caption (default: 1)."),
     seed: int | None = typer.Option(None, help="Random seed; the same seed gives the same motions (default: 0)."),
     sampler: str | None = typer.Option(None, help=SAMPLER_HELP),
-    steps: int | None = typer.Option(None, help="Sampling steps (default: 50)."),
+    steps: int | None = typer.Option(None, help="Sampling steps (default: 10)."),
     eta: float | None = typer.Option(None, help=ETA_HELP),
     cfg_scale: float | None = typer.Option(None, help=CFG_HELP),
     phys_scale: float | None = typer.Option(None, help="BioMoDiffuse models only: physics guidance weight, "
@@ -763,11 +763,11 @@ def evaluate_cmd(
     split: str | None = typer.Option(None, help="Split to evaluate on (default: test)."),
     physics: str | None = typer.Option(
         None, help="Comma-separated modes: none, none+floor, post:K, physdiff:<schedule>, morph "
-        "(default: none,none+floor,post:1,post:4,physdiff:end:4,space:1)."),
+        "(default: none,none+floor,post:1,post:4,physdiff:end:2,space:1)."),
     repeats: int | None = typer.Option(
         None, help="Repeated generation runs (95% intervals over them) (default: 3)."),
     steps: int | None = typer.Option(None, help="Sampling steps of the model's sampler; a BioMoDiffuse model "
-                                     "samples 10 SDE DPM-Solver++ steps (default: 50)."),
+                                     "samples 10 SDE DPM-Solver++ steps (default: 10)."),
     sampler: str | None = typer.Option(None, help=SAMPLER_HELP),
     eta: float | None = typer.Option(None, help=ETA_HELP),
     cfg_scale: float | None = typer.Option(None, help=CFG_HELP),
@@ -858,7 +858,7 @@ def serve_cmd(
     waiting: int = typer.Option(4, help="Requests that may wait behind the one being generated; past that the "
                                 "server answers 503 (busy) at once."),
     steps: int | None = typer.Option(None, help="Sampling steps, as generate's --steps: fewer answer sooner "
-                                     "(default: the model's sampler's, 50 DDIM steps for the shipped models)."),
+                                     "(default: the model's sampler's, 10 DPM-Solver++ steps for the shipped models)."),
 ) -> None:
     """A local web app that keeps the model warm: type a prompt, watch the motion, download it; and a JSON
     endpoint for scripts (POST /api/generate)."""

@@ -29,9 +29,9 @@ from tests.cli_runner import invoke  # noqa: E402
 PIN = ROOT / "tests" / "data" / "pins" / "generate.npz"
 
 # (prompts, seed, physics mode, seconds): one `physmotion generate` call each, with the shipped model and
-# its default sampler and steps (50). Plain sampling of two prompts in one batch pins the network, the
-# text encoder and the sampler; a short post:1 run pins the physics projection (P: MuJoCo tracking with
-# its resets) on top. Short clips keep the test in the fast tier (about 20 s of CPU).
+# its default sampler and steps (DPM-Solver++, 10 steps). Plain sampling of two prompts in one batch pins
+# the network, the text encoder and the sampler; a short post:1 run pins the physics projection (P:
+# MuJoCo tracking with its resets) on top. Short clips keep the test in the fast tier (about 20 s of CPU).
 RUNS: tuple[tuple[tuple[str, ...], int, str, float], ...] = (
     (("a person walks forward", "a person waves the right hand"), 7, "none", 2.0),
     (("a person jumps in place",), 3, "post:1", 2.0),

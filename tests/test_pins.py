@@ -9,8 +9,8 @@ from tests.make_pins import PIN, RUNS, load_pin
 
 
 def test_generated_motions_match_the_pin() -> None:
-    """``physmotion generate`` with the shipped default model, its default sampler and 50 steps, for the
-    prompts and seeds of ``tests/make_pins.py`` (two runs with ``--physics none``, one short ``post:1``
+    """``physmotion generate`` with the shipped default model and its default sampler (DPM-Solver++, 10
+    steps), for the prompts and seeds of ``tests/make_pins.py`` (two runs with ``--physics none``, one short ``post:1``
     run through the MuJoCo projection), gives the joints stored in ``tests/data/pins/generate.npz``:
     bit for bit (``np.array_equal``) for plain sampling; within 1e-5 m for the projected motion, whose
     float32 rounding moved by 1.07e-6 m when the thread count changed from 2 to 1

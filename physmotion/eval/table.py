@@ -68,7 +68,7 @@ RESET_COLUMNS = {"reset_rate": "reset_rate (share)", "resets": "resets (per moti
 class EvaluateConfig:
     """One evaluation run. ``quick()`` is the smoke-test preset."""
 
-    modes: tuple[str, ...] = ("none", "none+floor", "post:1", "post:4", "physdiff:end:4,space:1")
+    modes: tuple[str, ...] = ("none", "none+floor", "post:1", "post:4", "physdiff:end:2,space:1")
     split: str = "test"
     repeats: int = 3  # Guo: 20; one repeat of four modes costs minutes here
     max_motions: int | None = None  # a seeded subset of the split

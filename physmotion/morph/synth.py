@@ -35,7 +35,7 @@ from physmotion.checkpoint import WEIGHTS_FILE, weights_sha256
 from physmotion.conventions import FPS, MIN_FRAMES
 from physmotion.data.dataset import length_limit, read_captions, read_split
 from physmotion.diffusion.model import DEFAULT_MODEL_DIR, MotionDiffusion
-from physmotion.diffusion.samplers import SamplerConfig, sample
+from physmotion.diffusion.samplers import SamplerConfig, ddim_50, sample
 from physmotion.errors import PhysmotionError
 from physmotion.features.humanml3d import FEATURE_DIM, extract_features, recover_from_ric
 from physmotion.morph.captions import is_grounded
@@ -61,7 +61,7 @@ class SynthConfig:
     seed: int = 0  # noise of item i: (seed, i); lengths: one draw seeded by seed
     batch_size: int = 16  # samples per denoiser batch
     workers: int = 0  # physics worker processes, 0: one per core
-    sampler: SamplerConfig = field(default_factory=SamplerConfig)  # generate()'s defaults (DDIM, 50 steps)
+    sampler: SamplerConfig = field(default_factory=ddim_50)  # the shipped Morph model's synthetic data
     tau: float = TAU  # Morph's selection threshold (App. B), also P's failure threshold
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
     split: str = "train"
@@ -179,7 +179,7 @@ def _setting_sections(
 
 def _setting_defaults() -> dict:
     """The configuration sections of synth.json at their defaults, as a re-read synth.json has them."""
-    return json.loads(json.dumps(_setting_sections(PreprocessConfig(), ProjectionConfig(), SamplerConfig())))
+    return json.loads(json.dumps(_setting_sections(PreprocessConfig(), ProjectionConfig(), ddim_50())))
 
 
 def _with_defaults(stored: object, defaults: dict) -> object:

@@ -23,7 +23,7 @@ def _physical(done: Projected) -> Physical:
 
 
 class PhysDiffPipeline(Pipeline):
-    """P at the loop indices of ``schedule`` (``end:4,space:1``: the last four steps)."""
+    """P at the loop indices of ``schedule`` (``end:2,space:1``: the last two steps)."""
 
     projects = True
 
