@@ -187,7 +187,7 @@ class DPMSolverPP:
 
         self.alphas_cumprod = torch.cumprod(1.0 - _BETAS[cfg.beta_schedule](cfg.num_train_timesteps), dim=0)
         timesteps = np.array(karras_timesteps(self.alphas_cumprod.numpy(), steps), dtype=np.int64)
-        train_sigmas = np.array(((1 - self.alphas_cumprod) / self.alphas_cumprod) ** 0.5)
+        train_sigmas = (((1 - self.alphas_cumprod) / self.alphas_cumprod) ** 0.5).numpy()
         sigmas = np.interp(timesteps, np.arange(0, len(train_sigmas)), train_sigmas)
         self.sigmas = torch.from_numpy(np.concatenate([sigmas, [0]]).astype(np.float32))
         self.timesteps = torch.from_numpy(timesteps)
