@@ -52,8 +52,8 @@ def table(path: Path = DEFAULT) -> str:
     lines.append(f"{meta['motions']} test motions x {meta['repeats']} repeats, the shipped model "
                  f"(step {meta['model_steps']}), sampled with {sampler['sampler'].upper()} {sampler['steps']} "
                  f"steps, `{Path(path).relative_to(ROOT).as_posix()}`. The default sampler is now DPM-Solver++ "
-                 "with 10 steps and PhysDiff at its last 2: FID and R@3 within these rows' intervals at a "
-                 "fifth of the sampling time (`results/sampling_steps.md`).")
+                 "with 10 steps and PhysDiff at its last 2: FID and R@3 within these rows' intervals "
+                 "(`results/sampling_steps.md`).")
     return "\n".join(lines)
 
 

@@ -371,3 +371,19 @@ def test_every_result_names_its_preset_commit_and_command() -> None:
         assert not missing, f"{path.name}: its meta lacks {sorted(missing)}"
         named = meta["preset"].values() if isinstance(meta["preset"], dict) else [meta["preset"]]
         assert all(p is None or p in preset_names() for p in named), f"{path.name}: preset {meta['preset']}"
+
+
+def test_the_default_sampler_is_within_the_readme_rows_intervals() -> None:
+    """The README's table caption: DPM-Solver++ 10 (plain, and PhysDiff at its last 2 steps) has FID and R@3
+    within the committed DDIM-50 rows' 95 % intervals (or better), and it is the default."""
+    from physmotion.diffusion.samplers import SamplerConfig
+    from physmotion.pipelines.modes import PhysicsMode
+
+    readme = json.loads((ROOT / "results" / "evaluate_default.json").read_text())["rows"]
+    rows = json.loads((ROOT / "results" / "sampling_steps.json").read_text())["rows"]
+    default = SamplerConfig()
+    mine = {r["physics"]: r for r in rows if (r["sampler"], r["steps"]) == (default.sampler, default.steps)}
+    for physics, base in (("none", "none"), (str(PhysicsMode()), PHYSDIFF)):
+        got, ref = mine[physics], readme[base]
+        assert got["FID"]["mean"] <= ref["FID"]["mean"] + ref["FID"]["ci95"], physics
+        assert got["R@3"]["mean"] >= ref["R@3"]["mean"] - ref["R@3"]["ci95"], physics
