@@ -858,7 +858,8 @@ def serve_cmd(
     waiting: int = typer.Option(4, help="Requests that may wait behind the one being generated; past that the "
                                 "server answers 503 (busy) at once."),
     steps: int | None = typer.Option(None, help="Sampling steps, as generate's --steps: fewer answer sooner "
-                                     "(default: the model's sampler's, 10 DPM-Solver++ steps for the shipped models)."),
+                                     "(default: the model's sampler's, 10 DPM-Solver++ steps for the shipped "
+                                     "models)."),
 ) -> None:
     """A local web app that keeps the model warm: type a prompt, watch the motion, download it; and a JSON
     endpoint for scripts (POST /api/generate)."""
