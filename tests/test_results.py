@@ -387,3 +387,15 @@ def test_the_default_sampler_is_within_the_readme_rows_intervals() -> None:
         got, ref = mine[physics], readme[base]
         assert got["FID"]["mean"] <= ref["FID"]["mean"] + ref["FID"]["ci95"], physics
         assert got["R@3"]["mean"] >= ref["R@3"]["mean"] - ref["R@3"]["ci95"], physics
+
+
+def test_limitations_quote_the_first_motion_bench() -> None:
+    """docs/limitations.md's speed figures are results/first_motion.json's medians."""
+    times = json.loads((RESULTS / "first_motion.json").read_text())["seconds"]
+    plain = times["warm library: generate(), none, batch 1"]["median"]
+    cold = times["cold CLI: generate, none, batch 1"]["median"]
+    physdiff = times["warm library: generate(), physdiff, batch 1"]["median"]
+    quotes = [f"takes {plain:.2f} s", f"`physmotion generate` {cold:.2f} s", f"PhysDiff takes {physdiff / plain:.1f}x plain"]
+    flat = " ".join(DOCS["limitations"].read_text().split())
+    assert all(q in flat for q in quotes), [q for q in quotes if q not in flat]
+
