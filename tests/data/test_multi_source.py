@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from physmotion.data.build import BuildConfig, BuildReport, build_dataset, capture_of, source_names
+from physmotion.data.build import BuildReport, build_dataset, capture_of, source_names
 from physmotion.errors import PhysmotionError
 from physmotion.io import ClipInfo, load_manifest
 
@@ -91,9 +91,8 @@ def test_cli_builds_two_sources(mocap_dir: Path, hdm05_dir: Path, tmp_path: Path
 
 
 @pytest.fixture(scope="module")
-def both(mocap_dir: Path, hdm05_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> BuildReport:
-    return build_dataset([mocap_dir, hdm05_dir], tmp_path_factory.mktemp("both") / "all", BuildConfig(),
-                         progress=False)  # fmt: skip
+def both(built_all: BuildReport) -> BuildReport:
+    return built_all  # conftest.py's build of both collections, shared with the shipped model's tests
 
 
 @pytest.mark.slow
