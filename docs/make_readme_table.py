@@ -22,7 +22,7 @@ ROWS = (
     ("none+floor", "generated, then moved up or down onto the floor (`none+floor`)"),
     ("post:1", "generated, then one simulation (`post:1`)"),
     ("post:4", "generated, then four simulations (`post:4`)"),
-    ("physdiff:end:4,space:1", "**PhysDiff: simulations inside generation (`physdiff`, the last 4 steps)**"),
+    ("physdiff:end:2,space:1", "**PhysDiff: simulations inside generation (`physdiff`, the last 2 steps)**"),
 )
 
 
@@ -49,11 +49,11 @@ def table(path: Path = DEFAULT) -> str:
     meta = result["meta"]
     lines.append("")
     sampler = meta["sampler"]
-    lines.append(f"{meta['motions']} test motions x {meta['repeats']} repeats, the shipped model "
-                 f"(step {meta['model_steps']}), sampled with {sampler['sampler'].upper()} {sampler['steps']} "
-                 f"steps, `{Path(path).relative_to(ROOT).as_posix()}`. The default sampler is now DPM-Solver++ "
-                 "with 10 steps and PhysDiff at its last 2: FID and R@3 within these rows' intervals "
-                 "(`results/sampling_steps.md`).")
+    name = {"dpmpp": "DPM-Solver++", "ddim": "DDIM"}.get(sampler["sampler"], sampler["sampler"])
+    lines.append(f"{meta['motions']} test motions ({meta['data']}) x {meta['repeats']} repeats, the shipped model "
+                 f"and evaluator, sampled with {name} {sampler['steps']} steps, "
+                 f"`{Path(path).relative_to(ROOT).as_posix()}`. The model before it, trained on the mocap "
+                 "alone, is beside it in `results/retrained_default.md`.")
     return "\n".join(lines)
 
 

@@ -2,12 +2,11 @@
 
 A tool rather than an experiment: it writes into the model folder, not into results/.
 
-    python -m experiments.model_vocabulary --data data_build/mocap --max-frames 120 \
-        --model physmotion/weights/default
+    python -m experiments.model_vocabulary --data data_build/all --model physmotion/weights/default
 
 `physmotion generate` warns about prompt words outside this file (physmotion/text/vocabulary.py).
---max-frames is the length filter of the training run (the default model's: 120, its --crop at the
-time, when the crop also filtered); the script checks the motion count against the model's
+--max-frames is the length filter of the training run (the default model's: 196, every window; its
+step-8304 predecessor's was 120, when the crop also filtered); the script checks the motion count against the model's
 config.json (info.train_items) and refuses a mismatch, so the file describes what the model saw.
 """
 

@@ -41,8 +41,10 @@ def measure(model_dir: str, seeds: int, seconds: float) -> dict[str, dict]:
             for m in res.motions:
                 values.append(check.measure(m.joints))
                 passed.append(check.passes(m.joints))
+        # passes per prompt over the seeds (the motions come seed by seed, the prompts within a seed)
+        per_prompt = {p: int(sum(passed[i::len(prompts)])) for i, p in enumerate(prompts)}
         out[verb] = {"what": check.what, "threshold": check.threshold, "passed": float(np.mean(passed)),
-                     "median": float(np.median(values)), "values": values}  # fmt: skip
+                     "median": float(np.median(values)), "values": values, "per_prompt": per_prompt}  # fmt: skip
     return out
 
 
@@ -57,9 +59,11 @@ def main(argv: list[str] | None = None) -> int:
 
     def run() -> tuple[str, list[Path]]:
         figures = {m: measure(m, args.seeds, args.seconds) for m in models}
-        rows = [[m, verb, f["what"], f"{f['threshold']:g}", f"{f['passed']:.2f}", f"{f['median']:.3f}"]
+        rows = [[m, verb, f["what"], f"{f['threshold']:g}", f"{f['passed']:.2f}", f"{f['median']:.3f}",
+                 ", ".join(f"{k}/{args.seeds}" for k in f["per_prompt"].values())]
                 for m, verbs in figures.items() for verb, f in verbs.items()]  # fmt: skip
-        table = markdown_table(["model", "verb", "figure", "threshold", "share passing", "median"], rows)
+        table = markdown_table(["model", "verb", "figure", "threshold", "share passing", "median",
+                                "passing per prompt (caption, paraphrases)"], rows)  # fmt: skip
         n = args.seeds * len(next(iter(PROMPTS.values())))
         md = (
             f"Plain sampling (`none`), {args.seconds:g} s, {n} motions per verb ({args.seeds} seeds x 3 prompts: "

@@ -30,7 +30,9 @@ GENERATION = ("FID", "R@1", "R@3", "MM-Dist", "Diversity", "MModality")
 PHYSICAL = ("penetrate", "float", "skate", "phys_err", "reset_rate")
 
 
-def evaluate_command(model: str, evaluator: str, data: str, stem: Path, modes: tuple[str, ...] = MODES) -> str:
+def evaluate_command(
+    model: str, evaluator: str, data: str, stem: Path, modes: tuple[str, ...] = MODES
+) -> str:
     """The ``physmotion evaluate`` command that writes one model's table at ``stem``."""
     return (f"physmotion evaluate --data {data} --model {model} --evaluator {evaluator} "
             f"--physics {','.join(modes)} --repeats {REPEATS} -o {stem}")  # fmt: skip
@@ -69,7 +71,11 @@ def tables(models: dict[str, str], evaluator: str, data: str, out: Path,
 
 def _within(new: dict, old: dict, higher_better: bool) -> bool:
     """``new``'s mean inside ``old``'s 95 % interval or better than it."""
-    return new["mean"] >= old["mean"] - old["ci95"] if higher_better else new["mean"] <= old["mean"] + old["ci95"]
+    return (
+        new["mean"] >= old["mean"] - old["ci95"]
+        if higher_better
+        else new["mean"] <= old["mean"] + old["ci95"]
+    )
 
 
 def rows(found: dict[str, dict], modes: tuple[str, ...] = MODES) -> list[dict]:
@@ -99,39 +105,49 @@ def _fmt(v: dict | None, digits: int) -> str:
 def markdown(table_rows: list[dict], meta: dict) -> str:
     """The table with a header saying how it was made."""
     header = ["model", "physics", *GENERATION, *(f"{c} mm" if c != "reset_rate" else c for c in PHYSICAL),
-              "FID, R@3 within old"]  # fmt: skip
+              f"FID, R@3 within {meta['names']['old']}'s"]  # fmt: skip
     body = []
     for r in table_rows:
         within = (f"{'yes' if r['FID_within'] else 'no'}, {'yes' if r['R@3_within'] else 'no'}"
                   if "FID_within" in r else "-")  # fmt: skip
-        body.append([r["model"], r["physics"], *(_fmt(r.get(c), 3) for c in GENERATION),
+        body.append([meta["names"].get(r["model"], r["model"]), r["physics"], *(_fmt(r.get(c), 3) for c in GENERATION),
                      *(_fmt(r.get(c), 2) for c in PHYSICAL), within])  # fmt: skip
-    return (f"# The old and the retrained default model (issue 50, item 4)\n\n`{meta['command']}` (commit "
+    return (f"# {meta['title']}\n\n`{meta['command']}` (commit "
             f"{meta['commit']}, {meta['cpu']}, {meta['date']})\n\n"
-            f"old: `{meta['models']['old']}` ({meta['trained_on']['old']}); new: `{meta['models']['new']}` "
-            f"({meta['trained_on']['new']}). Evaluator `{meta['evaluator']}`. `{meta['data']}` test split "
+            f"{meta['names']['old']}: `{meta['models']['old']}` ({meta['trained_on']['old']}); "
+            f"{meta['names']['new']}: `{meta['models']['new']}` ({meta['trained_on']['new']}). Evaluator `{meta['evaluator']}`. `{meta['data']}` test split "
             f"({meta['motions']} motions), {REPEATS} repeats, mean ± 95 % interval, the default sampler "
-            f"({meta['sampler']}), seed 0; physical metrics on the humanoid surface. The new model's FID and "
-            f"R@3 are held against the old one's in the same mode (within the interval or better).\n\n"
+            f"({meta['sampler']}), seed 0; physical metrics on the humanoid surface. {meta['names']['new']}'s FID "
+            f"and R@3 are held against {meta['names']['old']}'s in the same mode (within the interval or better).\n\n"
             + markdown_table(header, body) + "\n")  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", required=True, help="HumanML3D-layout build whose test split both are evaluated on")
+    ap.add_argument(
+        "--data", required=True, help="HumanML3D-layout build whose test split both are evaluated on"
+    )
     ap.add_argument("--old", required=True, help="the old model folder")
     ap.add_argument("--new", required=True, help="the retrained model folder")
     ap.add_argument("--evaluator", required=True, help="evaluator folder (trained on --data's train split)")
-    ap.add_argument("--physics", default=",".join(MODES), help="physics modes, comma-separated (as evaluate's)")
+    ap.add_argument(
+        "--physics", default=",".join(MODES), help="physics modes, comma-separated (as evaluate's)"
+    )
     ap.add_argument("--tables", type=Path, default=ROOT / "runs" / "retrained_default")
     ap.add_argument("--out", type=Path, default=ROOT / "results" / "retrained_default")
+    ap.add_argument("--title", default="The old and the retrained default model (issue 50, item 4)")
+    ap.add_argument("--names", default="old,new", help="what the table calls the two models, comma-separated")
     args = ap.parse_args(argv)
 
     def run() -> tuple[str, list[Path]]:
         modes = tuple(str(m) for m in parse_modes(args.physics))
         found = tables({"old": args.old, "new": args.new}, args.evaluator, args.data, args.tables, modes)
         m = found["new"]["meta"]
+        names = args.names.split(",")
+        if len(names) != 2:
+            raise PhysmotionError(f"--names takes two names, got {args.names!r}")
         meta = run_meta(__file__, argv, preset={"physdiff": "sampling"}, data=args.data, evaluator=args.evaluator,
+                        title=args.title, names=dict(zip(LABELS, names)),
                         models={"old": args.old, "new": args.new}, motions=m["motions"], repeats=REPEATS,
                         trained_on={k: f"{v['meta']['model_trained_on']}, {v['meta']['model_steps']} steps, "
                                        f"licence {v['meta']['model_licence']}" for k, v in found.items()},
@@ -139,8 +155,11 @@ def main(argv: list[str] | None = None) -> int:
                                 f"{m['sampler']['cfg_scale']}")  # fmt: skip
         table_rows = rows(found, modes)
         plain = next(r for r in table_rows if r["model"] == "new" and r["physics"] == "none")
-        payload = {"meta": meta, "rows": table_rows,
-                   "acceptance": {"FID_within": plain["FID_within"], "R@3_within": plain["R@3_within"]}}
+        payload = {
+            "meta": meta,
+            "rows": table_rows,
+            "acceptance": {"FID_within": plain["FID_within"], "R@3_within": plain["R@3_within"]},
+        }
         text = markdown(table_rows, meta)
         return text, write_results(args.out, text, payload)
 

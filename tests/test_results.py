@@ -19,7 +19,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results"
-PHYSDIFF = "physdiff:end:4,space:1"
+PHYSDIFF = "physdiff:end:4,space:1"  # the DDIM-50 tables' PhysDiff (physdiff_quality, new_prompts_*, morph)
+DEFAULT_PHYSDIFF = "physdiff:end:2,space:1"  # the default sampler's, in evaluate_default
 DOCS = {
     "README": ROOT / "README.md",
     "results": RESULTS / "README.md",
@@ -44,7 +45,8 @@ def _change(x: float, base: float) -> str:
 def evaluate_quotes() -> list[str]:
     """The test-split table (results/evaluate_default.json) as the docs quote it."""
     rows = _load("evaluate_default.json")["rows"]
-    modes = ("real", "none", "none+floor", "post:1", "post:4", PHYSDIFF)
+    pd = DEFAULT_PHYSDIFF
+    modes = ("real", "none", "none+floor", "post:1", "post:4", pd)
     err = {m: rows[m]["phys_err"]["mean"] for m in modes}
     return [
         f"real Penetrate {rows['real']['penetrate']['mean']:.1f} mm",
@@ -53,12 +55,12 @@ def evaluate_quotes() -> list[str]:
         f"none+floor {err['none+floor']:.1f}",
         f"post:1 {err['post:1']:.1f}",
         f"post:4 {err['post:4']:.1f}",
-        f"PhysDiff {err[PHYSDIFF]:.1f} ± {rows[PHYSDIFF]['phys_err']['ci95']:.1f} mm",
-        f"{_change(err[PHYSDIFF], err['none'])} vs none",
-        f"{_change(err[PHYSDIFF], err['none+floor'])} vs none+floor",
-        f"FID {rows['none']['FID']['mean']:.3f} -> {rows[PHYSDIFF]['FID']['mean']:.3f}",
-        f"R@3 {rows['none']['R@3']['mean']:.3f} -> {rows[PHYSDIFF]['R@3']['mean']:.3f}",
-        f"reset_rate {rows[PHYSDIFF]['reset_rate']['mean']:.2f}",
+        f"PhysDiff {err[pd]:.1f} ± {rows[pd]['phys_err']['ci95']:.1f} mm",
+        f"{_change(err[pd], err['none'])} vs none",
+        f"{_change(err[pd], err['none+floor'])} vs none+floor",
+        f"FID {rows['none']['FID']['mean']:.3f} -> {rows[pd]['FID']['mean']:.3f}",
+        f"R@3 {rows['none']['R@3']['mean']:.3f} -> {rows[pd]['R@3']['mean']:.3f}",
+        f"reset_rate {rows[pd]['reset_rate']['mean']:.2f}",
     ]
 
 
@@ -333,18 +335,22 @@ def test_refine_claims_hold() -> None:
             assert rows["2 cm | refine 0.3"][key] < rows[f"2 cm | {other}"][key]
 
 
-def test_plain_samples_about_twice_as_jerky() -> None:
-    """docs/limitations.md: "Plain samples are about twice as jerky as captured motion"."""
+def test_plain_samples_more_jerky_than_captured() -> None:
+    """docs/limitations.md: "Plain samples are about 1.6 times as jerky as captured motion"."""
     rows = _load("evaluate_default.json")["rows"]
     ratio = rows["none"]["smoothness"]["mean"] / rows["real"]["smoothness"]["mean"]
-    assert 1.75 <= ratio < 2.5, ratio
-    assert "about twice as jerky as captured motion" in " ".join(DOCS["limitations"].read_text().split())
+    assert 1.45 <= ratio < 1.75, ratio
+    assert "about 1.6 times as jerky as captured motion" in " ".join(DOCS["limitations"].read_text().split())
 
 
 def test_real_motion_stands_on_the_floor_in_the_results() -> None:
-    """The metrics' floor convention: captured motion, grounded on the body surface, barely sinks."""
-    for name in ("evaluate_default.json", "schedule_study.json"):
-        assert _load(name)["rows"]["real"]["penetrate"]["mean"] < 2.0
+    """The metrics' floor convention: captured motion on its feet (the mocap test split), grounded on the body
+    surface, barely sinks. (The test split with HDM05 reads more: lying down puts the humanoid's torso shapes
+    into the floor, docs/results.md.)"""
+    for name in ("retrained_default_mocap.json", "schedule_study.json"):
+        rows = _load(name)["rows"]
+        real = rows[0] if isinstance(rows, list) else rows["real"]
+        assert real["penetrate"]["mean"] < 2.0, name
 
 
 def test_physdiff_beats_the_grounded_baseline_in_every_seed() -> None:
@@ -373,20 +379,24 @@ def test_every_result_names_its_preset_commit_and_command() -> None:
         assert all(p is None or p in preset_names() for p in named), f"{path.name}: preset {meta['preset']}"
 
 
-def test_the_default_sampler_is_within_the_readme_rows_intervals() -> None:
-    """The README's table caption: DPM-Solver++ 10 (plain, and PhysDiff at its last 2 steps) has FID and R@3
-    within the committed DDIM-50 rows' 95 % intervals (or better), and it is the default."""
+def test_the_default_sampler_is_within_the_ddim50_rows_intervals() -> None:
+    """docs/results.md: DPM-Solver++ 10 (plain, and PhysDiff at its last 2 steps), the default, has FID and R@3
+    within DDIM 50's 95 % intervals (or better) in the sampling study (results/sampling_steps.json, one model
+    and evaluator for all its rows); and evaluate_default was sampled with it."""
     from physmotion.diffusion.samplers import SamplerConfig
     from physmotion.pipelines.modes import PhysicsMode
 
-    readme = json.loads((ROOT / "results" / "evaluate_default.json").read_text())["rows"]
     rows = json.loads((ROOT / "results" / "sampling_steps.json").read_text())["rows"]
     default = SamplerConfig()
+    assert str(PhysicsMode()) == DEFAULT_PHYSDIFF
     mine = {r["physics"]: r for r in rows if (r["sampler"], r["steps"]) == (default.sampler, default.steps)}
-    for physics, base in (("none", "none"), (str(PhysicsMode()), PHYSDIFF)):
-        got, ref = mine[physics], readme[base]
+    ddim = {r["physics"]: r for r in rows if (r["sampler"], r["steps"]) == ("ddim", 50)}
+    for physics, base in (("none", "none"), (DEFAULT_PHYSDIFF, PHYSDIFF)):
+        got, ref = mine[physics], ddim[base]
         assert got["FID"]["mean"] <= ref["FID"]["mean"] + ref["FID"]["ci95"], physics
         assert got["R@3"]["mean"] >= ref["R@3"]["mean"] - ref["R@3"]["ci95"], physics
+    sampler = _load("evaluate_default.json")["meta"]["sampler"]
+    assert (sampler["sampler"], sampler["steps"]) == (default.sampler, default.steps)
 
 
 def test_limitations_quote_the_first_motion_bench() -> None:

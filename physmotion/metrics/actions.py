@@ -59,7 +59,10 @@ class ActionCheck:
     above: bool = True  # the figure must be at least the threshold (else at most)
 
     def passes(self, joints: np.ndarray) -> bool:
-        value = self.measure(joints)
+        return self.accepts(self.measure(joints))
+
+    def accepts(self, value: float) -> bool:
+        """Whether a measured figure passes the threshold."""
         return value >= self.threshold if self.above else value <= self.threshold
 
 

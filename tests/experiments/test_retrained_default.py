@@ -22,7 +22,11 @@ def _tables(folder: Path, fid: dict[str, float], r3: dict[str, float]) -> None:
         meta = {"split": "test", "repeats": 3, "seed": 0, "motions": 116, "modes": list(MODES), "data": DATA,
                 "model_trained_on": f"data_build/{label}", "model_steps": 10, "model_licence": "NC",
                 "sampler": {"sampler": "dpmpp", "steps": 10, "eta": 0.0, "cfg_scale": 2.5}}  # fmt: skip
-        figures = {"FID": _figure(fid[label], 0.01), "R@3": _figure(r3[label], 0.02), "phys_err": _figure(7.0, 0.3)}
+        figures = {
+            "FID": _figure(fid[label], 0.01),
+            "R@3": _figure(r3[label], 0.02),
+            "phys_err": _figure(7.0, 0.3),
+        }
         table = {"real": {"FID": _figure(0.001), "R@3": _figure(0.8, 0.03)}} | {m: figures for m in MODES}
         (folder / f"{label}.json").write_text(json.dumps({"meta": meta, "rows": table}))
 
@@ -42,7 +46,20 @@ def test_new_rows_are_held_against_the_old_intervals(tmp_path: Path) -> None:
 def test_main_writes_the_table_and_its_acceptance(tmp_path: Path) -> None:
     _tables(tmp_path, {"old": 0.20, "new": 0.15}, {"old": 0.80, "new": 0.85})
     out = tmp_path / "cmp"
-    argv = ["--data", DATA, "--old", "o", "--new", "n", "--evaluator", "e", "--tables", str(tmp_path), "--out", str(out)]
+    argv = [
+        "--data",
+        DATA,
+        "--old",
+        "o",
+        "--new",
+        "n",
+        "--evaluator",
+        "e",
+        "--tables",
+        str(tmp_path),
+        "--out",
+        str(out),
+    ]
     assert main(argv) == 0
     data = json.loads(out.with_name("cmp.json").read_text())
     assert {"preset", "commit", "cpu", "date", "command"} <= set(data["meta"])
