@@ -187,7 +187,8 @@ def selected_items(selection: Selection, feature_dim: int, max_frames: int = MAX
 
 
 def _licence_tags(*groups) -> list[str]:
-    tags = {t for g in groups for t in (g or []) if t}
+    """The distinct tags of every group; a joined tag ("NC,SA", a synthetic motion's) counts as its parts."""
+    tags = {part for g in groups for t in (g or []) for part in str(t).split(",") if part}
     return sorted(tags) or ["unknown"]
 
 

@@ -82,6 +82,15 @@ def test_nc_licence_carries_through(tiny_model_dir, built_dir, tmp_path) -> None
     assert "NC" in tuned.info["licence_tags"] and tuned.licence_tag == "NC"
 
 
+def test_joined_licence_tags_are_kept_as_their_parts(tiny_model_dir, built_dir, tmp_path) -> None:
+    """Synthetic items of a model trained with NC and SA data carry "NC,SA"; the tuned model lists NC and SA."""
+    synth = make_synth(built_dir, tiny_model_dir, tmp_path / "synth", n=4, licence_tags=("NC,SA",))
+    finetune(_cfg(tiny_model_dir, synth, built_dir, tmp_path / "ft", steps=2, mix=1.0), progress=False)
+    tuned = MotionDiffusion.load(tmp_path / "ft")
+    assert {"NC", "SA"} <= set(tuned.info["licence_tags"]) and "NC,SA" not in tuned.info["licence_tags"]
+    assert tuned.licence_tag == "NC,SA"
+
+
 def test_the_base_runs_loss_and_length_filter_carry_over(built_dir, tmp_path) -> None:
     """A base trained with the velocity loss on motions under 84 frames is fine-tuned with both: its real
     and synthetic items are those a run with its ``max_length`` keeps."""
