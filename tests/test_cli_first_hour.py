@@ -169,7 +169,7 @@ def test_shipped_vocabulary_is_the_training_captions(built_all_dir: Path) -> Non
     from physmotion.diffusion.model import DEFAULT_MODEL_DIR, MotionDiffusion
     from physmotion.text.vocabulary import load_vocabulary, training_vocabulary
 
-    counts, motions = training_vocabulary(built_all_dir)
+    counts, motions = training_vocabulary(built_all_dir, max_frames=MotionDiffusion.load().trained_max_length)
     assert motions == MotionDiffusion.load().info["train_items"]
     shipped = load_vocabulary(DEFAULT_MODEL_DIR)
     assert shipped == set(counts) and "juggles" not in shipped

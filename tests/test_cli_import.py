@@ -88,7 +88,7 @@ def test_render_view_refine_take_a_mapping(mocap_dir: Path, tmp_path: Path) -> N
     res = run("refine", walk, "--mapping", MAPPING, "--strength", "0", "-o", tmp_path / "r.npz")
     assert res.returncode == 0, res.stderr
     refined = Motion.load(tmp_path / "r.npz")
-    assert refined.licence_tag == "NC"  # the Bandai clip's tag travels (here from the model's)
+    assert refined.licence_tag == "NC,SA"  # the Bandai clip's NC travels, and the model's NC and SA
     bad = tmp_path / "bad.json"
     bad.write_text("{}")
     for command, extra in (("render", ["-o", tmp_path / "x.gif"]), ("view", ["-o", tmp_path / "x.html"]),

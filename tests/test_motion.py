@@ -79,6 +79,6 @@ def test_write_atomic_leaves_nothing_on_failure(tmp_path: Path) -> None:
 def test_a_joined_licence_tag_keeps_every_restriction() -> None:
     from physmotion.motion import joined_licence_tag
 
-    assert joined_licence_tag(["NC", "open"]) == "NC"  # the shipped models' data: Bandai (NC) and CMU
+    assert joined_licence_tag(["NC", "open"]) == "NC"  # Bandai (NC) and CMU (open): the mocap collection
     assert joined_licence_tag(["open", "SA", "NC"]) == "NC,SA"  # with HDM05 (CC BY-SA): both travel
     assert joined_licence_tag(["NC,SA", "SA"]) == "NC,SA" and joined_licence_tag(["open", "unknown"]) == "open"

@@ -55,7 +55,7 @@ def test_generate_answers_joints_as_the_library_makes_them(client: TestClient, n
     joints = np.array(got["joints"])
     assert joints.shape == (40, 22, 3) and got["frames"] == 40 and got["fps"] == 20.0
     assert (got["text"], got["physics"], got["seconds"], got["seed"]) == (WALK, "none", 2.0, 3)
-    assert got["length_source"] == "given" and got["licence_tag"] == "NC"
+    assert got["length_source"] == "given" and got["licence_tag"] == "NC,SA"
     want = generate([WALK], GenerateConfig(seconds=2.0, physics="none", seed=3), net).motions[0].joints
     np.testing.assert_allclose(joints, want, atol=5.1e-5)  # rounded to 0.1 mm
 

@@ -148,10 +148,13 @@ def test_a_folder_older_than_a_setting_resumes(model, built_dir: Path, full: Pat
         run(model, built_dir, out)
 
 def test_lengths_are_drawn_from_the_motions_the_model_trained_on(model, built_dir: Path) -> None:
-    # The shipped model's run kept motions under 124 frames (--max-length 120); the split holds longer ones.
+    # The shipped model's run kept every motion (--max-length 196); a run with --max-length 120 (the model
+    # before) keeps those under 124 frames, and the split holds longer ones.
     limit = model.trained_max_length
-    assert limit == model.info["train"]["max_length"] == 120
-    every, kept = split_lengths(built_dir), split_lengths(built_dir, max_length=limit)
+    assert limit == model.info["train"]["max_length"] == 196
+    every = split_lengths(built_dir)
+    assert np.array_equal(split_lengths(built_dir, max_length=limit), every)
+    kept = split_lengths(built_dir, max_length=120)
     assert kept.max() < 124 <= every.max() and len(kept) == int((every < 124).sum()) > 0
 
 
