@@ -6,8 +6,9 @@ A tool rather than an experiment: it writes into the model folder, not into resu
 
 `physmotion generate` warns about prompt words outside this file (physmotion/text/vocabulary.py).
 --max-frames is the length filter of the training run (the default model's: 196, every window; its
-step-8304 predecessor's was 120, when the crop also filtered); the script checks the motion count against the model's
-config.json (info.train_items) and refuses a mismatch, so the file describes what the model saw.
+step-8304 predecessor's was 120, when the crop also filtered); the script checks the motion count
+against the model's config.json (info.train_items) and refuses a mismatch, so the file describes what
+the model saw.
 """
 
 from __future__ import annotations

@@ -2,15 +2,18 @@
 split, sampler and seeds for both.
 
     python -m experiments.retrained_default --data data_build/all --old OLD_MODEL --new NEW_MODEL
-        --evaluator EVALUATOR [--physics MODES] [--tables runs/retrained_default] [--out results/retrained_default]
+        --evaluator EVALUATOR [--physics MODES] [--tables runs/retrained_default]
+        [--out results/retrained_default] [--title TITLE] [--names old,new]
 
-Each model gets one ``physmotion evaluate`` run (:func:`evaluate_command` spells it; test split, 3 repeats,
-the default sampler, seed 0) for the physics modes (default :data:`MODES`), written to
-``<tables>/<label>.{md,json}``. A table already there is read, after checking that its meta names the same
-computation (its modes may be more), instead of re-run; a mode a table lacks is left out of its rows, so
-another model's table (for instance the Morph-tuned one's, with ``morph``) can be set beside it. The new model's table is ``physmotion evaluate``'s default computation once the new model and
-evaluator are the shipped ones, so it doubles as ``results/evaluate_default``. The new model's plain FID and R@3 are held against the old one's 95 % intervals: within or
-better (FID at most the upper edge, R@3 at least the lower edge), the issue's acceptance.
+Each model gets one ``physmotion evaluate`` run (:func:`evaluate_command` spells it; test split, 3
+repeats, the default sampler, seed 0) for the physics modes (default :data:`MODES`), written to
+``<tables>/<label>.{md,json}``. A table already there is read, after checking that its meta names the
+same computation (its modes may be more), instead of re-run; a mode a table lacks is left out of its
+rows, so another model's table (the Morph-tuned one's, with ``morph``) can be set beside it. With the
+default modes, the new model's table is ``physmotion evaluate``'s default computation once the new model
+and evaluator are the shipped ones, so it doubles as ``results/evaluate_default``. The new model's FID
+and R@3 are held against the old one's 95 % intervals: within or better (FID at most the upper edge,
+R@3 at least the lower edge), the issue's acceptance.
 """
 
 from __future__ import annotations
@@ -110,16 +113,18 @@ def markdown(table_rows: list[dict], meta: dict) -> str:
     for r in table_rows:
         within = (f"{'yes' if r['FID_within'] else 'no'}, {'yes' if r['R@3_within'] else 'no'}"
                   if "FID_within" in r else "-")  # fmt: skip
-        body.append([meta["names"].get(r["model"], r["model"]), r["physics"], *(_fmt(r.get(c), 3) for c in GENERATION),
+        name = meta["names"].get(r["model"], r["model"])
+        body.append([name, r["physics"], *(_fmt(r.get(c), 3) for c in GENERATION),
                      *(_fmt(r.get(c), 2) for c in PHYSICAL), within])  # fmt: skip
+    old, new = meta["names"]["old"], meta["names"]["new"]
     return (f"# {meta['title']}\n\n`{meta['command']}` (commit "
             f"{meta['commit']}, {meta['cpu']}, {meta['date']})\n\n"
-            f"{meta['names']['old']}: `{meta['models']['old']}` ({meta['trained_on']['old']}); "
-            f"{meta['names']['new']}: `{meta['models']['new']}` ({meta['trained_on']['new']}). Evaluator `{meta['evaluator']}`. `{meta['data']}` test split "
-            f"({meta['motions']} motions), {REPEATS} repeats, mean ± 95 % interval, the default sampler "
-            f"({meta['sampler']}), seed 0; physical metrics on the humanoid surface. {meta['names']['new']}'s FID "
-            f"and R@3 are held against {meta['names']['old']}'s in the same mode (within the interval or better).\n\n"
-            + markdown_table(header, body) + "\n")  # fmt: skip
+            f"{old}: `{meta['models']['old']}` ({meta['trained_on']['old']}); "
+            f"{new}: `{meta['models']['new']}` ({meta['trained_on']['new']}). Evaluator "
+            f"`{meta['evaluator']}`. `{meta['data']}` test split ({meta['motions']} motions), {REPEATS} "
+            f"repeats, mean ± 95 % interval, the default sampler ({meta['sampler']}), seed 0; physical "
+            f"metrics on the humanoid surface. {new}'s FID and R@3 are held against {old}'s in the same mode "
+            f"(within the interval or better).\n\n" + markdown_table(header, body) + "\n")  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -146,8 +151,8 @@ def main(argv: list[str] | None = None) -> int:
         names = args.names.split(",")
         if len(names) != 2:
             raise PhysmotionError(f"--names takes two names, got {args.names!r}")
-        meta = run_meta(__file__, argv, preset={"physdiff": "sampling"}, data=args.data, evaluator=args.evaluator,
-                        title=args.title, names=dict(zip(LABELS, names)),
+        meta = run_meta(__file__, argv, preset={"physdiff": "sampling"}, data=args.data,
+                        evaluator=args.evaluator, title=args.title, names=dict(zip(LABELS, names)),
                         models={"old": args.old, "new": args.new}, motions=m["motions"], repeats=REPEATS,
                         trained_on={k: f"{v['meta']['model_trained_on']}, {v['meta']['model_steps']} steps, "
                                        f"licence {v['meta']['model_licence']}" for k, v in found.items()},
