@@ -75,6 +75,17 @@ def report(run: Callable[[], tuple[str, list[Path]]]) -> int:
     return 0
 
 
+def heading(title: str, meta: dict) -> str:
+    """A results file's first lines: ``# title``, then the command, commit, CPU and date of ``meta``."""
+    return f"# {title}\n\n`{meta['command']}` (commit {meta['commit']}, {meta['cpu']}, {meta['date']})\n\n"
+
+
+def within_interval(value: float, ref: dict, higher_better: bool) -> bool:
+    """``value`` inside ``ref``'s 95 % interval (``{"mean", "ci95"}``) or better than it: at least its lower
+    edge where higher is better (R@3), at most its upper edge otherwise (FID)."""
+    return value >= ref["mean"] - ref["ci95"] if higher_better else value <= ref["mean"] + ref["ci95"]
+
+
 def markdown_table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
     """A Markdown table: one header row, then one row per entry of ``rows`` (cells as ``str`` gives them)."""
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]

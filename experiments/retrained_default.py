@@ -22,7 +22,15 @@ import argparse
 import json
 from pathlib import Path
 
-from experiments._results import ROOT, markdown_table, report, run_meta, write_results
+from experiments._results import (
+    ROOT,
+    heading,
+    markdown_table,
+    report,
+    run_meta,
+    within_interval,
+    write_results,
+)
 from physmotion.errors import PhysmotionError
 from physmotion.pipelines.modes import parse_modes
 
@@ -72,15 +80,6 @@ def tables(models: dict[str, str], evaluator: str, data: str, out: Path,
     return result
 
 
-def _within(new: dict, old: dict, higher_better: bool) -> bool:
-    """``new``'s mean inside ``old``'s 95 % interval or better than it."""
-    return (
-        new["mean"] >= old["mean"] - old["ci95"]
-        if higher_better
-        else new["mean"] <= old["mean"] + old["ci95"]
-    )
-
-
 def rows(found: dict[str, dict], modes: tuple[str, ...] = MODES) -> list[dict]:
     """One row per (mode, model) where that model's table has the mode, the real data's row first; FID and
     R@3 of each new row against the old model's same mode, where both have it."""
@@ -93,8 +92,8 @@ def rows(found: dict[str, dict], modes: tuple[str, ...] = MODES) -> list[dict]:
                 continue
             row = {"model": label, "physics": mode, **r}
             if label == "new" and mode in old:
-                row["FID_within"] = _within(r["FID"], old[mode]["FID"], False)
-                row["R@3_within"] = _within(r["R@3"], old[mode]["R@3"], True)
+                row["FID_within"] = within_interval(r["FID"]["mean"], old[mode]["FID"], False)
+                row["R@3_within"] = within_interval(r["R@3"]["mean"], old[mode]["R@3"], True)
             out.append(row)
     return out
 
@@ -117,8 +116,7 @@ def markdown(table_rows: list[dict], meta: dict) -> str:
         body.append([name, r["physics"], *(_fmt(r.get(c), 3) for c in GENERATION),
                      *(_fmt(r.get(c), 2) for c in PHYSICAL), within])  # fmt: skip
     old, new = meta["names"]["old"], meta["names"]["new"]
-    return (f"# {meta['title']}\n\n`{meta['command']}` (commit "
-            f"{meta['commit']}, {meta['cpu']}, {meta['date']})\n\n"
+    return (heading(meta["title"], meta) +
             f"{old}: `{meta['models']['old']}` ({meta['trained_on']['old']}); "
             f"{new}: `{meta['models']['new']}` ({meta['trained_on']['new']}). Evaluator "
             f"`{meta['evaluator']}`. `{meta['data']}` test split ({meta['motions']} motions), {REPEATS} "

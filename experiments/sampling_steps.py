@@ -31,7 +31,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from experiments._results import markdown_table, report, run_meta, write_results
+from experiments._results import heading, markdown_table, report, run_meta, within_interval, write_results
 from physmotion.errors import PhysmotionError
 
 BASELINE = "ddim50"
@@ -127,11 +127,6 @@ def warm_timings(settings: Sequence[Setting], rounds: int, model=None) -> dict[S
     return times
 
 
-def _within(value: float, ref: dict, higher_better: bool) -> bool:
-    """Inside the reference's 95 % interval or better than it (FID under, R@3 over its far edge)."""
-    return value >= ref["mean"] - ref["ci95"] if higher_better else value <= ref["mean"] + ref["ci95"]
-
-
 def table_rows(
     runs: Sequence[EvalRun], tables: dict[str, dict], times: dict[Setting, list[float]]
 ) -> list[dict]:
@@ -150,8 +145,8 @@ def table_rows(
                 "sampler": run.sampler, "steps": run.steps, "physics": mode,
                 **{k: r[k] for k in ("FID", "R@3", "R@1", "MM-Dist", "Diversity", "phys_err", "penetrate", "float",
                                      "skate", "smoothness", "reset_rate", "resets", "sec/motion") if k in r},
-                "FID_within": _within(r["FID"]["mean"], ref["FID"], False),
-                "R@3_within": _within(r["R@3"]["mean"], ref["R@3"], True),
+                "FID_within": within_interval(r["FID"]["mean"], ref["FID"], False),
+                "R@3_within": within_interval(r["R@3"]["mean"], ref["R@3"], True),
                 "warm_s": min(warm) if warm else None, "warm_rounds_s": warm,
                 "warm_over_plain": min(warm) / min(plain) if warm and plain and mode != "none" else None,
             })  # fmt: skip
@@ -190,8 +185,7 @@ def markdown(rows: list[dict], meta: dict) -> str:
     timing = (f"Warm: `generate` of one {SECONDS:g} s motion in a warm process, min of {t['rounds']} rounds, "
               f"{t['torch_threads']} torch threads, load average {t['load_before']} before and "
               f"{t['load_after']} after." if t else "Warm timings not run (--skip-timing).")  # fmt: skip
-    return (f"# Few-step sampling against DDIM 50 (issue 51, item 2)\n\n`{meta['command']}` (commit "
-            f"{meta['commit']}, {meta['cpu']}, {meta['date']})\n\n"
+    return (heading("Few-step sampling against DDIM 50 (issue 51, item 2)", meta) +
             f"Test split ({meta['motions']} motions), {REPEATS} repeats, mean ± 95 % interval, the shipped model "
             f"and evaluator, CFG 2.5, eta 0, seed 0; Phys-Err on the humanoid surface. Plain rows are held "
             f"against DDIM 50's `none` intervals, PhysDiff rows against DDIM 50's `{PHYSDIFF_BASE}` (within or "
