@@ -3,8 +3,10 @@ none``) of each verb's prompts over seeds, measured by :data:`physmotion.metrics
 
 Usage: python -m experiments.new_verbs [--model default --model runs/x/model ...] [--seeds 5] [--out results/new_verbs]
 
-Each verb has its HDM05 training caption and two paraphrases that no caption has (unseen wording). One
-row per model and verb: the share of motions that pass the check, and the median figure.
+Each verb has its HDM05 training caption, two paraphrases that no caption has (unseen wording, used in
+the tests), and three more (:data:`FRESH`) written before the caption rewrites of training were measured and
+never used to choose anything. One row per model and verb: the share of motions that pass the check over
+all six prompts, and per group of prompts.
 """
 
 from __future__ import annotations
@@ -22,18 +24,27 @@ PROMPTS: dict[str, list[str]] = {
     "lie down": ["a person lies down on the floor", "someone lies down on the ground", "a man lies down"],
     "hop": ["a person hops once on both legs", "someone jumps up with both feet", "a person hops in place"],
 }  # fmt: skip
+FRESH: dict[str, list[str]] = {
+    "squat": ["a woman squats", "the person crouches down low and then stands up",
+              "someone bends their knees into a squat and rises again"],
+    "kick": ["a man kicks", "the person does a front kick with one leg", "someone kicks their foot out in front of them"],
+    "lie down": ["a woman lies down", "the person gets down onto the ground and lies flat",
+                 "someone lies down on their back"],
+    "hop": ["a man hops", "the person hops up and lands on both feet", "someone does a small two-footed hop"],
+}  # fmt: skip
 
 
-def measure(model_dir: str, seeds: int, seconds: float) -> dict[str, dict]:
-    """verb -> {"passed": share, "median": figure, "values": per motion} for one model folder ("default":
-    the shipped one)."""
+def measure(model_dir: str, seeds: int, seconds: float,
+            prompts_by_verb: dict[str, list[str]] = PROMPTS) -> dict[str, dict]:  # fmt: skip
+    """verb -> {"passed": share, "median": figure, "values": per motion, "per_prompt": passes over the
+    seeds} for one model folder ("default": the shipped one)."""
     from physmotion.diffusion.model import MotionDiffusion
     from physmotion.generate import GenerateConfig, generate
     from physmotion.metrics.actions import ACTION_CHECKS
 
     model = MotionDiffusion.load(None if model_dir == "default" else model_dir)
     out: dict[str, dict] = {}
-    for verb, prompts in PROMPTS.items():
+    for verb, prompts in prompts_by_verb.items():
         check = ACTION_CHECKS[verb]
         values, passed = [], []
         for seed in range(seeds):
@@ -58,18 +69,24 @@ def main(argv: list[str] | None = None) -> int:
     models = args.model or ["default"]
 
     def run() -> tuple[str, list[Path]]:
-        figures = {m: measure(m, args.seeds, args.seconds) for m in models}
+        every = {verb: PROMPTS[verb] + FRESH[verb] for verb in PROMPTS}
+        figures = {m: measure(m, args.seeds, args.seconds, every) for m in models}
+
+        def group(f: dict, prompts: list[str]) -> str:
+            return f"{sum(f['per_prompt'][p] for p in prompts)}/{args.seeds * len(prompts)}"
+
         rows = [[m, verb, f["what"], f"{f['threshold']:g}", f"{f['passed']:.2f}", f"{f['median']:.3f}",
+                 group(f, PROMPTS[verb][:1]), group(f, PROMPTS[verb][1:]), group(f, FRESH[verb]),
                  ", ".join(f"{k}/{args.seeds}" for k in f["per_prompt"].values())]
                 for m, verbs in figures.items() for verb, f in verbs.items()]  # fmt: skip
-        table = markdown_table(["model", "verb", "figure", "threshold", "share passing", "median",
-                                "passing per prompt (caption, paraphrases)"], rows)  # fmt: skip
-        n = args.seeds * len(next(iter(PROMPTS.values())))
+        table = markdown_table(["model", "verb", "figure", "threshold", "share passing", "median", "caption",
+                                "paraphrases", "fresh paraphrases", "passing per prompt"], rows)  # fmt: skip
+        n = args.seeds * len(next(iter(every.values())))
         md = (
-            f"Plain sampling (`none`), {args.seconds:g} s, {n} motions per verb ({args.seeds} seeds x 3 prompts: "
-            f"the HDM05 caption and two paraphrases).\n\n{table}\n"
+            f"Plain sampling (`none`), {args.seconds:g} s, {n} motions per verb ({args.seeds} seeds x 6 prompts: "
+            f"the HDM05 caption, the two paraphrases the tests use, and three fresh ones).\n\n{table}\n"
         )
-        meta = run_meta(__file__, argv, None, seeds=args.seeds, seconds=args.seconds, prompts=PROMPTS)
+        meta = run_meta(__file__, argv, None, seeds=args.seeds, seconds=args.seconds, prompts=every)
         return table, write_results(args.out, md, {"meta": meta, "models": figures})
 
     return report(run)

@@ -645,6 +645,9 @@ def train_denoiser_cmd(
     vel_weight: float | None = typer.Option(None, help="Weight of the velocity loss, the x0 error's "
                                             "frame-to-frame differences (MDM's lambda_vel) (default: 0.0)."),
     warmup: int | None = typer.Option(None, help="Steps of linear learning-rate warm-up (default: 200)."),
+    caption_aug: float | None = typer.Option(
+        None, help="Probability of each caption rewrite: another subject ('someone', 'a man'), a shorter "
+        "clause ('a person kicks' for 'a person kicks forward with the left leg') (default: 0.0)."),
     init: Path | None = typer.Option(None, help="Start from this model folder's weights (fine-tuning); its "
                                      "shape replaces --arch, --d-model, --layers and --heads."),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in --out where it stopped."),
@@ -669,7 +672,8 @@ def train_denoiser_cmd(
     cfg = _with(TrainConfig(data=str(data), out=str(out), denoiser=den), crop=crop, max_length=max_length,
                 batch_size=batch_size, steps=steps, lr=lr, bf16=bf16, device=device, seed=seed,
                 checkpoint_minutes=checkpoint_minutes, accel_weight=accel_weight, phys_weight=phys_weight,
-                emg_weight=emg_weight, phys_drop=phys_drop, vel_weight=vel_weight, warmup=warmup)  # fmt: skip
+                emg_weight=emg_weight, phys_drop=phys_drop, vel_weight=vel_weight, warmup=warmup,
+                caption_aug=caption_aug)  # fmt: skip
     info = {"init": {"model": str(init), "steps": start.info.get("steps")}} if start is not None else None
     result = train_denoiser(cfg, resume=resume, progress=sys.stderr.isatty(), init=start, info=info)
     last = f", last loss {result.losses[-1][1]:.4f}" if result.losses else ""

@@ -199,7 +199,7 @@ def test_help_defaults_are_the_dataclasses() -> None:
                 "device": train.device, "seed": train.seed, "checkpoint-minutes": train.checkpoint_minutes,
                 "accel-weight": train.accel_weight, "phys-weight": train.phys_weight,
                 "emg-weight": train.emg_weight, "phys-drop": train.phys_drop, "vel-weight": train.vel_weight,
-                "warmup": train.warmup}  # fmt: skip
+                "warmup": train.warmup, "caption-aug": train.caption_aug}  # fmt: skip
     stated = _help_defaults("train", "denoiser")
     assert set(stated) == set(expected)
     for name, value in expected.items():

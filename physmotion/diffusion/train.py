@@ -37,6 +37,7 @@ from physmotion.errors import PhysmotionError
 from physmotion.features.biomech import FEATURE_DIM_BIOMECH, SLICES_BIOMECH
 from physmotion.features.humanml3d import FEATURE_DIM
 from physmotion.motion import write_atomic
+from physmotion.text.augment import rewrite_batch
 from physmotion.text.encoder import load_text_encoder
 from physmotion.training import (
     batch_indices,
@@ -81,6 +82,9 @@ class TrainConfig:
     ema_decay: float = 0.999
     grad_clip: float = 1.0
     text_drop: float = 0.1
+    # Probability of each caption rewrite (another subject, a shorter clause: physmotion.text.augment);
+    # 0 trains on the captions as written (docs/decisions/data.md, "Caption rewrites").
+    caption_aug: float = 0.0
     # BioMoDiffuse (Sec. 3.3, Eq. 8-9): with 329-d features the loss is L_diffusion (the 263 HumanML3D dims)
     # + accel_weight * L_accel (the 66 joint-acceleration dims of the output); "biomo" adds
     # phys_weight * L_phys (the physical network's accelerations) + emg_weight * L_emg (its activations
@@ -159,6 +163,9 @@ def train_denoiser(
         raise PhysmotionError(f"max length {cfg.max_length} must lie between the crop ({cfg.crop}) and "
                               f"{MAX_FRAMES}")
 
+    if not 0.0 <= cfg.caption_aug <= 1.0:
+        raise PhysmotionError(f"caption rewrite probability {cfg.caption_aug} must lie between 0 and 1")
+
     # The crop sets the window length only; max_length decides which motions are kept. (Up to step 7904
     # the shipped model's run passed the crop as max_frames, which dropped the longer ones.)
     biomo = (init.denoiser if init is not None else cfg.denoiser).arch == "biomo"
@@ -227,7 +234,10 @@ def train_denoiser(
         dataset.set_epoch(epoch)
         batch = collate([dataset[i] for i in idx])
         x0, mask = batch["motion"].to(accel.device), batch["mask"].to(accel.device)
-        text = encoder.encode(batch["text"]).to(accel.device)
+        captions = batch["text"]
+        if cfg.caption_aug > 0:  # rewritten captions are one-offs: kept off the disk cache
+            captions = rewrite_batch(captions, cfg.seed, step, cfg.caption_aug)
+        text = encoder.encode(captions, persist=cfg.caption_aug == 0).to(accel.device)
         g = seeded_generator(cfg.seed, 2, step)
         t = torch.randint(0, cfg.diffusion.num_train_timesteps, (len(idx),), generator=g)
         if accel.device.type == "cpu":

@@ -5,7 +5,7 @@ Layout of ``SYNTH/`` (one item per planned sample, ids ``s{index:06d}``, caption
 
     synth.json                     the run's settings (model and its sha256, config, items planned)
     index.csv                      one row per finished item: id,caption,frames,mpjpe_mean,mpjpe_max,
-                                   success,resets,grounded,licence_tag
+                                   success,resets,grounded,licence_tag (frames: its feature rows, T-1)
     new_joints/<id>.npy            P's simulated joints (T, 22, 3) float32, physical coordinates
     new_joint_vecs/<id>.npy        their HumanML3D features (T-1, 263) float32 (extract_features)
     input_joints/<id>.npy          the pre-processed generated joints (T, 22, 3) float32
@@ -151,7 +151,7 @@ def plan_items(captions: Sequence[str], lengths: np.ndarray, per_caption: int, s
 
 def item_noise(seed: int, index: int, frames: int, dim: int) -> torch.Tensor:
     """x_T (frames, dim) of planned item ``index``: from (seed, index) only, drawn at a fixed width
-    (``frames`` = the model's max_frames) and cropped by the caller, so neither the batch nor its
+    (``frames`` = the network's max_frames) and cropped by the caller, so neither the batch nor its
     padding changes it."""
     state = int(np.random.SeedSequence([seed, index]).generate_state(1)[0])
     return torch.randn(frames, dim, generator=torch.Generator().manual_seed(state))
@@ -163,7 +163,8 @@ def item_noise(seed: int, index: int, frames: int, dim: int) -> torch.Tensor:
 def _identity(info: dict) -> dict:
     """The synth.json fields a continued run must share."""
     keys = ("model_sha256", "feature_dim", "skeleton", "fps", "split", "per_caption", "seed", "tau",
-            "preprocess", "projection", "sampler", "max_frames", "items_planned", "plan_sha256")  # fmt: skip
+            "preprocess", "projection", "sampler", "max_frames", "items_planned", "plan_sha256",
+            "lengths")  # fmt: skip
     return {k: info.get(k) for k in keys}
 
 
@@ -318,6 +319,7 @@ def synthesize(
         "seed": cfg.seed, "tau": cfg.tau, "licence_tags": list(net.info.get("licence_tags", [])),
         "licence_tag": net.licence_tag, **_setting_sections(cfg.preprocess, projection, cfg.sampler),
         "max_frames": max_frames, "items_planned": len(plan), "plan_sha256": plan_sha,
+        "lengths": "features",  # a planned length counts feature rows (before: joint frames, one fewer rows)
     }  # fmt: skip
     info = json.loads(json.dumps(info))  # tuples -> lists, as a re-read synth.json has them
     _check_resume(out, info)
@@ -341,7 +343,7 @@ def synthesize(
         for b in range(0, len(todo), cfg.batch_size):
             batch = todo[b : b + cfg.batch_size]
             t0 = time.perf_counter()
-            joints = _sample_batch(net, batch, cfg, max_frames)
+            joints = _sample_batch(net, batch, cfg)
             t1 = time.perf_counter()
             results = map_in_workers(partial(refine_item, preprocess_config=cfg.preprocess,
                                              projection=projection), joints, cfg.workers)  # fmt: skip
@@ -357,12 +359,15 @@ def synthesize(
                        physics_seconds=t_phys)  # fmt: skip
 
 
-def _sample_batch(net: MotionDiffusion, batch: list[PlannedItem], cfg: SynthConfig,
-                  max_frames: int) -> list[np.ndarray]:  # fmt: skip
-    """Plain sampling (no physics) of one batch: joints (T_i, 22, 3) float64 per item."""
-    lengths = [p.frames for p in batch]
+def _sample_batch(net: MotionDiffusion, batch: list[PlannedItem], cfg: SynthConfig) -> list[np.ndarray]:
+    """Plain sampling (no physics) of one batch: joints (T_i, 22, 3) float64 per item, T_i = frames + 1
+    (at most the network's width), so that their features, one row fewer, have the planned length: a
+    length drawn from the data is a feature length, and the shortest would otherwise fall under the
+    training minimum (docs/decisions/morph.md, "Morph re-tuned from the retrained default")."""
+    full = net.denoiser.max_frames
+    lengths = [min(p.frames + 1, full) for p in batch]
     width, dim = max(lengths), net.denoiser.feature_dim
-    noise = torch.stack([item_noise(cfg.seed, p.index, max_frames, dim)[:width] for p in batch])
+    noise = torch.stack([item_noise(cfg.seed, p.index, full, dim)[:width] for p in batch])
     x = sample(net, [p.caption for p in batch], lengths, cfg.sampler, seed=cfg.seed, noise=noise)
     feats = net.normalizer.denormalize(x.float().cpu().numpy())
     return [recover_from_ric(f[:n].astype(np.float64)) for f, n in zip(feats, lengths)]

@@ -58,7 +58,7 @@ class TextEncoder(Protocol):
     name: str
     dim: int
 
-    def encode(self, texts: Sequence[str]) -> TextFeatures: ...
+    def encode(self, texts: Sequence[str], persist: bool = True) -> TextFeatures: ...
 
 
 class HFTextEncoder:
@@ -105,8 +105,9 @@ class HFTextEncoder:
         the first ``max_tokens`` are encoded."""
         return len(self.tokenizer(text, truncation=False)["input_ids"])
 
-    def encode(self, texts: Sequence[str]) -> TextFeatures:
-        """Encode captions (cached by exact text). An empty caption is an error: use CFG's null text."""
+    def encode(self, texts: Sequence[str], persist: bool = True) -> TextFeatures:
+        """Encode captions (cached in memory by exact text; ``persist`` is for the API's sake: this
+        encoder keeps no disk cache). An empty caption is an error: use CFG's null text."""
         texts = list(texts)
         for t in texts:
             if not isinstance(t, str) or not t.strip():
@@ -232,7 +233,7 @@ class MiniLMEncoder:
             pass
 
     @torch.no_grad()
-    def _encode_one(self, text: str) -> None:
+    def _encode_one(self, text: str, persist: bool = True) -> None:
         ids = self.tokenizer.encode(text).ids
         count = len(ids)
         if count > self.max_tokens:  # as transformers truncates: the first tokens, then [SEP]
@@ -245,12 +246,13 @@ class MiniLMEncoder:
         tok = self.model(x, torch.ones_like(x))[0].float().clone()
         pooled = torch.nn.functional.normalize(tok.mean(0), dim=0)
         self._cache[text] = (tok, pooled, count)
-        self._write(text)
+        if persist:
+            self._write(text)
 
-    def _ensure(self, texts: Sequence[str]) -> None:
+    def _ensure(self, texts: Sequence[str], persist: bool = True) -> None:
         for text in dict.fromkeys(texts):
             if text not in self._cache and not self._read(text):
-                self._encode_one(text)
+                self._encode_one(text, persist)
 
     def count_tokens(self, text: str) -> int:
         """Tokens of ``text`` as the encoder would read it untruncated (special tokens included); only
@@ -259,13 +261,14 @@ class MiniLMEncoder:
             return self._cache[text][2]
         return len(self.tokenizer.encode(text).ids)
 
-    def encode(self, texts: Sequence[str]) -> TextFeatures:
-        """Encode captions (cached by exact text). An empty caption is an error: use CFG's null text."""
+    def encode(self, texts: Sequence[str], persist: bool = True) -> TextFeatures:
+        """Encode captions (cached by exact text). An empty caption is an error: use CFG's null text.
+        persist False: new captions stay in memory, off the disk cache (training's one-off rewrites)."""
         texts = list(texts)
         for t in texts:
             if not isinstance(t, str) or not t.strip():
                 raise PhysmotionError("text is empty: give a caption such as 'a person walks forward'")
-        self._ensure(texts)
+        self._ensure(texts, persist)
         return _padded(texts, self._cache, self.dim)
 
 

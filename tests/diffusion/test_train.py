@@ -360,3 +360,28 @@ def test_a_biomo_model_says_where_its_activations_come_from(tiny_biomo, tiny_mod
 
     assert tiny_biomo.info["muscle_activations"] == ACTIVATIONS_ORIGIN and "no EMG" in ACTIVATIONS_ORIGIN
     assert "muscle_activations" not in tiny_model.info
+
+
+def test_caption_rewrites_train_and_stay_off_the_disk_cache(
+    small_built_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """With every caption rewritten (p = 1) the run trains and resumes exactly, and the disk cache gains
+    only captions as the data write them, none of the one-off rewrites."""
+    from physmotion.data.dataset import read_captions
+    from physmotion.text.encoder import load_text_encoder
+
+    encoder = load_text_encoder("minilm")
+    disk = tmp_path / "cache"  # this test's own cache folder: other xdist workers write to the shared one
+    monkeypatch.setattr(encoder, "disk", disk)
+    monkeypatch.setattr(encoder, "_cache", {})
+    whole, split = tmp_path / "whole", tmp_path / "split"
+    train_denoiser(tiny_config(small_built_dir, whole, steps=4, caption_aug=1.0), progress=False)
+    train_denoiser(tiny_config(small_built_dir, split, steps=2, caption_aug=1.0), progress=False)
+    train_denoiser(tiny_config(small_built_dir, split, steps=4, caption_aug=1.0), resume=True, progress=False)
+    a, b = (torch.load(p / STATE_FILE, weights_only=False)["net"] for p in (whole, split))
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    written = {str(np.load(f)["text"]) for f in disk.glob("*.npz")}
+    data = {c for f in (small_built_dir / "texts").glob("*.txt") for c, _, _ in read_captions(f)}
+    assert written <= data, sorted(written - data)[:5]
+    with pytest.raises(PhysmotionError, match="between 0 and 1"):
+        train_denoiser(tiny_config(small_built_dir, tmp_path / "bad", caption_aug=1.5), progress=False)

@@ -65,10 +65,13 @@ def test_layout(full: Path) -> None:
     for r in rows:
         sid, frames = r["id"], int(r["frames"])
         sim, inp = (np.load(full / d / f"{sid}.npy") for d in ("new_joints", "input_joints"))
-        assert sim.shape == inp.shape == (frames, 22, 3) and sim.dtype == inp.dtype == np.float32
+        # the planned length (40: the data's shortest, the config's cap) is the features' rows, which
+        # fine-tuning's 40-frame minimum keeps; the joints have one frame more
+        assert frames == 40 and sim.shape == inp.shape == (frames + 1, 22, 3)
+        assert sim.dtype == inp.dtype == np.float32
         for joints, vecs in ((sim, "new_joint_vecs"), (inp, "input_joint_vecs")):
             feats = np.load(full / vecs / f"{sid}.npy")
-            assert feats.dtype == np.float32
+            assert feats.shape == (frames, 263) and feats.dtype == np.float32
             np.testing.assert_allclose(feats, extract_features(joints)[0], atol=1e-5)
         assert (full / "texts" / f"{sid}.txt").read_text() == f"{r['caption']}##0.0#0.0\n"
         assert 0 <= float(r["mpjpe_mean"]) <= float(r["mpjpe_max"])
@@ -145,6 +148,11 @@ def test_a_folder_older_than_a_setting_resumes(model, built_dir: Path, full: Pat
     info["projection"]["shaping"]["hover_support"] = 0.05
     (out / "synth.json").write_text(json.dumps(info))
     with pytest.raises(PhysmotionError, match=r"projection\.shaping\.hover_support: 0\.05 there, 0\.0 now"):
+        run(model, built_dir, out)
+    # a folder from before planned lengths counted feature rows holds items one row short: not continued
+    del info["projection"]["shaping"]["hover_support"], info["lengths"]
+    (out / "synth.json").write_text(json.dumps(info))
+    with pytest.raises(PhysmotionError, match=r"lengths: None there, features now"):
         run(model, built_dir, out)
 
 def test_lengths_are_drawn_from_the_motions_the_model_trained_on(model, built_dir: Path) -> None:
