@@ -319,7 +319,7 @@ def synthesize(
         "seed": cfg.seed, "tau": cfg.tau, "licence_tags": list(net.info.get("licence_tags", [])),
         "licence_tag": net.licence_tag, **_setting_sections(cfg.preprocess, projection, cfg.sampler),
         "max_frames": max_frames, "items_planned": len(plan), "plan_sha256": plan_sha,
-        "lengths": "features",  # a planned length counts feature rows (before: joint frames, one fewer rows)
+        "lengths": "features",  # a planned length counts feature rows (docs/decisions/morph.md)
     }  # fmt: skip
     info = json.loads(json.dumps(info))  # tuples -> lists, as a re-read synth.json has them
     _check_resume(out, info)
@@ -363,7 +363,7 @@ def _sample_batch(net: MotionDiffusion, batch: list[PlannedItem], cfg: SynthConf
     """Plain sampling (no physics) of one batch: joints (T_i, 22, 3) float64 per item, T_i = frames + 1
     (at most the network's width), so that their features, one row fewer, have the planned length: a
     length drawn from the data is a feature length, and the shortest would otherwise fall under the
-    training minimum (docs/decisions/morph.md, "Morph re-tuned from the retrained default")."""
+    training minimum (docs/decisions/morph.md, "synthetic lengths count feature rows")."""
     full = net.denoiser.max_frames
     lengths = [min(p.frames + 1, full) for p in batch]
     width, dim = max(lengths), net.denoiser.feature_dim

@@ -21,7 +21,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-# HumanML3D's most frequent sentence openings (its texts/ folder), "a person" first.
+# Subjects HumanML3D's annotators open their captions with, "a person" (ours) first.
 SUBJECTS: tuple[str, ...] = ("a person", "someone", "a man", "a woman", "the person", "a figure", "a human")
 # Words that open a modifier after the main verb phrase; a cut before one leaves the action itself.
 CUT_BEFORE = frozenset({"with", "in", "on", "at", "to", "into", "onto", "from", "like", "and", "then",
