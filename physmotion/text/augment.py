@@ -42,14 +42,15 @@ def cut_points(caption: str) -> list[int]:
     """Word counts at which ``caption`` may be cut (each < its length); empty for a caption with no
     subject. A word ending in a comma also ends a clause."""
     words = caption.split()
-    n = _subject(words)
+    return _cut_points(words, _subject(words))
+
+
+def _cut_points(words: list[str], n: int) -> list[int]:
+    """:func:`cut_points` of ``words`` whose first ``n`` form the subject (none where n is 0)."""
     if n == 0:
         return []
-    out = []
-    for i in range(n + 1, len(words)):  # subject + at least one word kept
-        if words[i].lower() in CUT_BEFORE or words[i - 1].endswith(","):
-            out.append(i)
-    return out
+    # subject + at least one word kept
+    return [i for i in range(n + 1, len(words)) if words[i].lower() in CUT_BEFORE or words[i - 1].endswith(",")]
 
 
 def rewrite(caption: str, rng: np.random.Generator, p: float) -> str:
@@ -60,7 +61,7 @@ def rewrite(caption: str, rng: np.random.Generator, p: float) -> str:
     if n == 0 or p <= 0:
         return caption
     swap, cut = rng.random(2) < p
-    points = cut_points(caption)
+    points = _cut_points(words, n)
     if cut and points:
         words = words[: points[rng.integers(len(points))]]
         words[-1] = words[-1].rstrip(",;:")

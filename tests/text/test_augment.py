@@ -3,18 +3,17 @@ that they are drawn from the step's seed."""
 
 from __future__ import annotations
 
-import csv
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from physmotion.io.importer import load_manifest
 from physmotion.text.augment import SUBJECTS, cut_points, rewrite, rewrite_batch
 
 
 def _captions(folder: Path) -> list[str]:
-    with open(folder / "manifest.csv", newline="", encoding="utf-8") as f:
-        return sorted({c.strip() for row in csv.DictReader(f) for c in row["captions"].split("|") if c.strip()})
+    return sorted({c for clip in load_manifest(folder) for c in clip.captions})
 
 
 def _after_subject(caption: str) -> list[str]:
