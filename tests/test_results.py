@@ -264,6 +264,34 @@ def imitator_quotes() -> list[str]:
     ]
 
 
+def _pair_rows(name: str) -> dict[tuple[str, str], dict]:
+    """An experiments/retrained_default.py table (results/<name>.json) by (model label, physics mode)."""
+    return {(r["model"], r["physics"]): r for r in _load(name)["rows"]}
+
+
+def morph_retuned_quotes() -> list[str]:
+    """The shipped Morph model against its base (results/morph_retuned.json) and against the control
+    fine-tuned on real motions alone (results/morph_control.json)."""
+    rows, ctrl = _pair_rows("morph_retuned.json"), _pair_rows("morph_control.json")
+    pd = DEFAULT_PHYSDIFF
+
+    def err(row: dict, digits: str = ".1f") -> str:
+        return f"{row['phys_err']['mean']:{digits}}"
+
+    base, tuned = rows["old", "none"], rows["new", "none"]
+    return [
+        f"none {err(base)} -> {err(tuned)} mm ({_change(tuned['phys_err']['mean'], base['phys_err']['mean'])})",
+        f"FID {base['FID']['mean']:.3f} -> {tuned['FID']['mean']:.3f}",
+        f"R@3 {base['R@3']['mean']:.3f} -> {tuned['R@3']['mean']:.3f}",
+        f"none+floor {err(rows['old', 'none+floor'])} -> {err(rows['new', 'none+floor'])}",
+        f"post:1 {err(rows['old', 'post:1'])} -> {err(rows['new', 'post:1'])}",
+        f"PhysDiff {err(rows['old', pd])} -> {err(rows['new', pd])} ± {rows['new', pd]['phys_err']['ci95']:.1f} mm",
+        f"inference mode {err(rows['new', 'morph'])} mm",
+        f"control none {err(ctrl['new', 'none'])} mm, FID {ctrl['new', 'none']['FID']['mean']:.3f}",
+        f"control none+floor {err(ctrl['new', 'none+floor'])}, post:1 {err(ctrl['new', 'post:1'])}",
+    ]
+
+
 QUOTES = {  # which doc quotes which result file
     ("docs results", "evaluate"): evaluate_quotes,
     ("docs results", "bench"): bench_quotes,
@@ -276,6 +304,8 @@ QUOTES = {  # which doc quotes which result file
     ("docs results", "biomodiffuse"): biomodiffuse_quotes,
     ("docs results", "refine"): refine_quotes,
     ("docs results", "imitator"): imitator_quotes,
+    ("docs results", "morph retuned"): morph_retuned_quotes,
+    ("morph card", "morph retuned"): morph_retuned_quotes,
     ("results", "evaluate"): evaluate_quotes,
     ("results", "schedule"): schedule_quotes,
     ("model card", "evaluate"): evaluate_quotes,
@@ -293,7 +323,7 @@ QUOTES = {  # which doc quotes which result file
 def _section(text: str, source: str) -> str:
     """The paragraph(s) of a doc that quote ``source``: those naming its file or command."""
     files = {"evaluate": "evaluate_default", "bench": "physdiff_quality", "schedule": "schedule_study",
-             "morph": "results/morph.md",
+             "morph": "results/morph.md", "morph retuned": "results/morph_retuned.md",
              "dynamic": "projection_dynamic",
              "new prompts": "new_prompts_default", "new prompts morph": "new_prompts_morph",
              "new prompts fine": "new_prompts_fine",

@@ -40,9 +40,10 @@ SKELETON = "smpl22"
 # the original setup); the learning rate is the one setting Morph changes.
 # The base's loss terms (vel_weight) belong to that setup too, and so does its length filter
 # (MotionDiffusion.trained_max_length, set in _prepare): without them a fine-tune of the default trains on
-# windows and a loss it never saw (docs/decisions/morph.md: "Morph from the velocity-loss default").
+# windows and a loss it never saw (docs/decisions/morph.md: "Morph from the velocity-loss default"). Its caption
+# rewrites too: without them a fine-tune loses wordings they taught ("Morph re-tuned from the shipped default").
 INHERITED = ("batch_size", "crop", "random_crop", "warmup", "weight_decay", "ema_decay", "grad_clip",
-             "text_drop", "vel_weight", "log_every")  # fmt: skip
+             "text_drop", "vel_weight", "caption_aug", "log_every")  # fmt: skip
 
 
 class FinetuneError(PhysmotionError):

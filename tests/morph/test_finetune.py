@@ -92,8 +92,8 @@ def test_joined_licence_tags_are_kept_as_their_parts(tiny_model_dir, built_dir, 
 
 
 def test_the_base_runs_loss_and_length_filter_carry_over(built_dir, tmp_path) -> None:
-    """A base trained with the velocity loss on motions under 84 frames is fine-tuned with both: its real
-    and synthetic items are those a run with its ``max_length`` keeps."""
+    """A base trained with the velocity loss and caption rewrites on motions under 84 frames is fine-tuned
+    with all three: its real and synthetic items are those a run with its ``max_length`` keeps."""
     import numpy as np
 
     from physmotion.data.dataset import MotionDataset
@@ -101,12 +101,12 @@ def test_the_base_runs_loss_and_length_filter_carry_over(built_dir, tmp_path) ->
     from tests.conftest import tiny_config
 
     base = tmp_path / "base"
-    train_denoiser(tiny_config(built_dir, base, steps=2, d_model=32, layers=1, max_length=80, vel_weight=1.0),
-                   progress=False)  # fmt: skip
+    train_denoiser(tiny_config(built_dir, base, steps=2, d_model=32, layers=1, max_length=80, vel_weight=1.0,
+                               caption_aug=0.5), progress=False)  # fmt: skip
     synth = make_synth(built_dir, base, tmp_path / "synth", n=16)
     result = finetune(_cfg(base, synth, built_dir, tmp_path / "ft", steps=2), progress=False)
     train = MotionDiffusion.load(tmp_path / "ft").info["train"]
-    assert train["vel_weight"] == 1.0 and train["max_length"] == 80
+    assert train["vel_weight"] == 1.0 and train["max_length"] == 80 and train["caption_aug"] == 0.5
     assert result.real_items == len(MotionDataset(built_dir, "train", crop=64, max_frames=80)) < len(
         MotionDataset(built_dir, "train", crop=64))
     lengths = [len(np.load(path)) for _, path, _ in select(synth).training_items()]

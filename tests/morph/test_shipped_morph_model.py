@@ -16,11 +16,11 @@ MORPH_DIR = Path(DEFAULT_MODEL_DIR).parent / "morph"
 def test_morph_model_card_facts_and_generation() -> None:
     model = MotionDiffusion.load(MORPH_DIR)
     info = model.info["morph"]
-    assert info["rounds"] == 1 and info["selected"] == {"refined": 439, "input": 32}  # one round, as the card
-    assert info["mix"] == 0.1
-    # fine-tuned from the retrained default before its caption rewrites (the card says so; same data)
-    assert info["base_model_sha256"].startswith("09a239618e9b")
-    assert info["base_model_sha256"] != weights_sha256(DEFAULT_MODEL_DIR)
+    assert info["rounds"] == 1 and info["selected"] == {"refined": 430, "input": 41}  # one round, as the card
+    assert info["mix"] == 0.1 and info["synthetic_items"] == 471  # every synthetic motion long enough to train on
+    # fine-tuned from the shipped default, with its caption rewrites (the base run's settings)
+    assert info["base_model_sha256"] == weights_sha256(DEFAULT_MODEL_DIR)
+    assert model.info["train"]["caption_aug"] == model.info["base_info"]["train"]["caption_aug"] == 0.5
     assert model.floor == FLOOR_SURFACE  # fine-tuned with the soles on the floor
     # the base's NC and SA data carry through, each tag on its own
     assert model.licence_tag == "NC,SA" and model.info["licence_tags"] == ["NC", "SA", "open"]
