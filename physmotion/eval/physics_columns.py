@@ -1,5 +1,6 @@
-"""The physics columns of the evaluation tables: what P's falls did (resets), Morph's imitation failures,
-and the body surface the physical metrics are measured on."""
+"""The physics columns of the evaluation tables: what P's falls did (resets), the outside help P's body got
+(the root residual), Morph's imitation failures, and the body surface the physical metrics are measured
+on."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import numpy as np
 
 from physmotion.errors import PhysmotionError
 from physmotion.generate import GenerateResult
+from physmotion.metrics.report import residual_stats
 
 
 def reset_columns(results: Sequence[GenerateResult]) -> dict[str, float]:
@@ -19,6 +21,14 @@ def reset_columns(results: Sequence[GenerateResult]) -> dict[str, float]:
     if not counts:
         return {}
     return {"reset_rate": float(np.mean([c > 0 for c in counts])), "resets": float(np.mean(counts))}
+
+
+def residual_columns(results: Sequence[GenerateResult]) -> dict[str, float]:
+    """The root residual P applied to its outputs, over every frame of them: ``residual_force`` and
+    ``residual_force_p95`` (x body weight), ``residual_torque`` and ``residual_torque_p95`` (x body weight x
+    1 m). A motion Morph's selection kept as sampled has none. Empty for modes without P's output."""
+    residuals = [m.residual for r in results for m in r.motions if m.residual is not None]
+    return residual_stats(np.concatenate(residuals)) if residuals else {}
 
 
 def imitation_columns(results: Sequence[GenerateResult]) -> dict[str, float]:

@@ -21,7 +21,9 @@ surface (:func:`ground_on_surface`, the constant shift with the least Phys-Err) 
 row is; ``none`` is measured as sampled.
 ``reset_rate`` is the share of output motions whose projection put the fallen humanoid back on the motion
 at least once (MPJPE past tau, 0.15 m in generation) and ``resets`` the mean number of those jumps per
-motion. Neither is Morph's imitation failure rate: ``imitation_failure_rate``, given for the ``morph`` mode, is
+motion. ``residual_force`` and ``residual_torque`` (with their 95th percentiles) are the root residual P
+applied to its outputs, the outside help its body got, over every frame, in body weights (x 1 m for the
+torque). Neither is Morph's imitation failure rate: ``imitation_failure_rate``, given for the ``morph`` mode, is
 the share of its motions whose imitation failed (MPJPE past 0.5 m), so that the sampled motion was kept.
 """
 
@@ -41,7 +43,7 @@ from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.physdiff import joints_to_features, on_data_floor, projection_settings
 from physmotion.errors import PhysmotionError
 from physmotion.eval.evaluator import Evaluator
-from physmotion.eval.physics_columns import imitation_columns, metric_surface, reset_columns
+from physmotion.eval.physics_columns import imitation_columns, metric_surface, reset_columns, residual_columns
 from physmotion.features.humanml3d import recover_from_ric
 from physmotion.generate import GenerateConfig, generate
 from physmotion.metrics import physical_metrics
@@ -61,6 +63,8 @@ GENERATION_COLUMNS = ("R@1", "R@2", "R@3", "FID", "MM-Dist", "Diversity", "MModa
 BETTER = {"R@1": "↑", "R@2": "↑", "R@3": "↑", "FID": "↓", "MM-Dist": "↓", "Diversity": "→", "MModality": "↑",
           "sec/motion": "↓"}  # fmt: skip
 RESET_COLUMNS = {"reset_rate": "reset_rate (share)", "resets": "resets (per motion)",
+                 "residual_force": "root force (W)", "residual_force_p95": "root force p95 (W)",
+                 "residual_torque": "root torque (W m)", "residual_torque_p95": "root torque p95 (W m)",
                  "imitation_failure_rate": "imitation_failure_rate (share)"}
 
 
@@ -260,7 +264,8 @@ def _generate(model, captions, items, gen_cfg, batch, tick) -> tuple[list, list,
         bodies += out.bodies
         results.append(out)
         tick(len(joints))
-    return joints, bodies, time.perf_counter() - start, reset_columns(results) | imitation_columns(results)
+    columns = reset_columns(results) | residual_columns(results) | imitation_columns(results)
+    return joints, bodies, time.perf_counter() - start, columns
 
 
 def _scores(emb, text_emb, real_emb, r, cfg) -> dict[str, float]:
