@@ -275,8 +275,8 @@ def morph_retuned_quotes() -> list[str]:
     rows, ctrl = _pair_rows("morph_retuned.json"), _pair_rows("morph_control.json")
     pd = DEFAULT_PHYSDIFF
 
-    def err(row: dict, digits: str = ".1f") -> str:
-        return f"{row['phys_err']['mean']:{digits}}"
+    def err(row: dict) -> str:
+        return f"{row['phys_err']['mean']:.1f}"
 
     base, tuned = rows["old", "none"], rows["new", "none"]
     return [
