@@ -276,7 +276,7 @@ def project_motion(
     if config.ilc_passes:
         kept += f" (pass {int(result.ilc_pass)} of {config.ilc_passes + 1})"
     console.print(f"wrote {out} ({controller}): {kept}; MPJPE mean {1000 * result.mpjpe.mean():.0f} mm, "
-                  f"{residual_line(result.residual)} (W: body weight); a joint's torque over its actuator's "
+                  f"{residual_line(result.residual, config.residual_bound())} (W: body weight); a joint's torque over its actuator's "
                   f"limit in {100 * result.over_limit.mean():.1f} % of frames", highlight=False)  # fmt: skip
 
 
@@ -520,7 +520,7 @@ def generate_cmd(
                           unknown=unknown)
     console.print(f"wrote {len(result.motions)} motion(s) to {out} ({len(paths)} files, run logged in "
                   f"generate.json)", highlight=False)  # fmt: skip
-    phys = physics_summary(result)
+    phys = physics_summary(result, cfg.residual_bound())
     if phys:
         console.print(f"physics: {phys}", highlight=False)
 

@@ -67,6 +67,14 @@ class GenerateConfig:
         return replace(self, projection=self.projection.with_controller(controller, policy),
                        morph_projection=self.morph_projection.with_controller(controller, policy))  # fmt: skip
 
+    def residual_bound(self) -> float | None:
+        """The root residual's force cap (x W) of the P this run applies (``morph_projection`` for morph,
+        ``projection`` for post and physdiff), or None for modes without P."""
+        mode = self.physics.kind
+        if mode == MORPH:
+            return self.morph_projection.residual_bound()
+        return self.projection.residual_bound() if mode in (POST, PHYSDIFF) else None
+
 
 def check_request(texts: Sequence[str], config: GenerateConfig, model: MotionDiffusion) -> int | None:
     """Validate the request before any work; returns the number of frames (None: predicted per text)."""
@@ -246,8 +254,9 @@ def unknown_prompt_words(texts: Sequence[str], model_dir: str | Path) -> dict[st
     return {t: w for t, w in found.items() if w}
 
 
-def physics_summary(result: GenerateResult) -> str:
-    """The projections' falls and resets in plain words, for the end of a run ('' without projections)."""
+def physics_summary(result: GenerateResult, bound: float | None = None) -> str:
+    """The projections' falls and resets in plain words, for the end of a run ('' without projections);
+    ``bound``, the root residual's force cap (x W), adds the share of frames at it."""
     log = result.projections
     if not log.tracked:
         return ""
@@ -258,7 +267,7 @@ def physics_summary(result: GenerateResult) -> str:
                    f"failure rate {failed / n:.2f})" if failed else "none was kept as sampled"))
     falls, resets = len(log.tracked) - sum(log.tracked), sum(result.resets)
     residuals = [m.residual for m in result.motions if m.residual is not None]
-    helped = f"; {residual_line(np.concatenate(residuals))} (W: body weight)" if residuals else ""
+    helped = f"; {residual_line(np.concatenate(residuals), bound)} (W: body weight)" if residuals else ""
     if not falls:
         return f"the simulated humanoid followed the motion without falling in all {len(log.tracked)} " \
             f"projections{helped}"

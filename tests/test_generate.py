@@ -126,6 +126,14 @@ def test_at_fine_step_halves_every_projections_step() -> None:
     assert (fine.physics, fine.seed, fine.sampler) == (config.physics, config.seed, config.sampler)
 
 
+def test_residual_bound_follows_the_mode() -> None:
+    assert GenerateConfig(physics="none").residual_bound() is None
+    assert GenerateConfig(physics="none+floor").residual_bound() is None
+    assert GenerateConfig(physics="post:2").residual_bound() == GenerateConfig().projection.residual_bound() == 0.3
+    assert GenerateConfig(physics="physdiff").residual_bound() == 0.3
+    assert GenerateConfig(physics="morph").residual_bound() == 0.2  # Morph's P is the plain one
+
+
 def test_cli_generate_fine_step_is_another_projection_and_is_logged(tiny_model_dir: Path, tmp_path: Path) -> None:
     """``--fine-step`` simulates P at 1/720 s: the run log says so, and the projected motion differs."""
     joints = {}

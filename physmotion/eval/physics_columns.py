@@ -23,12 +23,13 @@ def reset_columns(results: Sequence[GenerateResult]) -> dict[str, float]:
     return {"reset_rate": float(np.mean([c > 0 for c in counts])), "resets": float(np.mean(counts))}
 
 
-def residual_columns(results: Sequence[GenerateResult]) -> dict[str, float]:
+def residual_columns(results: Sequence[GenerateResult], bound: float | None = None) -> dict[str, float]:
     """The root residual P applied to its outputs, over every frame of them: ``residual_force`` and
     ``residual_force_p95`` (x body weight), ``residual_torque`` and ``residual_torque_p95`` (x body weight x
-    1 m). A motion Morph's selection kept as sampled has none. Empty for modes without P's output."""
+    1 m); with ``bound`` (P's force cap, x W) ``residual_at_cap``, the share of frames at it. A motion
+    Morph's selection kept as sampled has none. Empty for modes without P's output."""
     residuals = [m.residual for r in results for m in r.motions if m.residual is not None]
-    return residual_stats(np.concatenate(residuals)) if residuals else {}
+    return residual_stats(np.concatenate(residuals), bound) if residuals else {}
 
 
 def imitation_columns(results: Sequence[GenerateResult]) -> dict[str, float]:

@@ -64,6 +64,7 @@ BETTER = {"R@1": "↑", "R@2": "↑", "R@3": "↑", "FID": "↓", "MM-Dist": "�
           "sec/motion": "↓"}  # fmt: skip
 RESET_COLUMNS = {"reset_rate": "reset_rate (share)", "resets": "resets (per motion)",
                  "residual_force": "root force (W)", "residual_force_p95": "root force p95 (W)",
+                 "residual_at_cap": "root force at cap (share)",
                  "residual_torque": "root torque (W m)", "residual_torque_p95": "root torque p95 (W m)",
                  "imitation_failure_rate": "imitation_failure_rate (share)"}
 
@@ -264,7 +265,7 @@ def _generate(model, captions, items, gen_cfg, batch, tick) -> tuple[list, list,
         bodies += out.bodies
         results.append(out)
         tick(len(joints))
-    columns = reset_columns(results) | residual_columns(results) | imitation_columns(results)
+    columns = reset_columns(results) | residual_columns(results, gen_cfg.residual_bound()) | imitation_columns(results)
     return joints, bodies, time.perf_counter() - start, columns
 
 

@@ -17,6 +17,10 @@ from rich.table import Table
 from physmotion.errors import PhysmotionError
 from physmotion.metrics.physical import METRICS, RECORDED, format_table
 
+# A frame's root residual force this close to its cap counts as at the cap: the frame value is the mean of
+# its residual updates, so it reaches the cap only when every update was clipped.
+AT_CAP = 0.99
+
 
 def path_labels(paths: Sequence[str | Path]) -> list[str]:
     """One label per path: its shortest trailing part that no other path shares.
@@ -104,15 +108,22 @@ def residual_summary(motion) -> dict[str, float]:
     return residual_stats(motion.residual)
 
 
-def residual_stats(residual: np.ndarray) -> dict[str, float]:
-    """Mean and 95th percentile of a root residual (..., 2): force (x W) and torque (x W x 1 m), over frames."""
+def residual_stats(residual: np.ndarray, bound: float | None = None) -> dict[str, float]:
+    """Mean and 95th percentile of a root residual (..., 2): force (x W) and torque (x W x 1 m), over frames.
+    With ``bound``, the force's cap (x W), also ``residual_at_cap``: the share of frames whose force is
+    within 1 % of it (the body held by the most outside help P allows, every residual update of the frame)."""
     r = np.asarray(residual, dtype=np.float64).reshape(-1, 2)
-    return {"residual_force": float(r[:, 0].mean()), "residual_force_p95": float(np.percentile(r[:, 0], 95)),
-            "residual_torque": float(r[:, 1].mean()), "residual_torque_p95": float(np.percentile(r[:, 1], 95))}
+    out = {"residual_force": float(r[:, 0].mean()), "residual_force_p95": float(np.percentile(r[:, 0], 95)),
+           "residual_torque": float(r[:, 1].mean()), "residual_torque_p95": float(np.percentile(r[:, 1], 95))}
+    if bound is not None:
+        out["residual_at_cap"] = float(np.mean(r[:, 0] >= AT_CAP * bound))
+    return out
 
 
-def residual_line(residual: np.ndarray) -> str:
-    """One plain line for a CLI summary: the root residual's mean and p95, force and torque."""
-    s = residual_stats(residual)
-    return (f"root residual force mean {s['residual_force']:.3f} W, p95 {s['residual_force_p95']:.3f} W; "
+def residual_line(residual: np.ndarray, bound: float | None = None) -> str:
+    """One plain line for a CLI summary: the root residual's mean and p95, force and torque, and with
+    ``bound`` (the force's cap, x W) the share of frames at it."""
+    s = residual_stats(residual, bound)
+    cap = "" if bound is None else f", at its {bound:.2f} W cap in {100 * s['residual_at_cap']:.1f} % of frames"
+    return (f"root residual force mean {s['residual_force']:.3f} W, p95 {s['residual_force_p95']:.3f} W{cap}; "
             f"torque mean {s['residual_torque']:.3f} W m, p95 {s['residual_torque_p95']:.3f} W m")

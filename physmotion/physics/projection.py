@@ -93,6 +93,16 @@ class ProjectionConfig:
         """This P driven by ``controller`` ("tracker" or "policy", the latter loaded from ``policy``)."""
         return replace(self, controller=controller, policy=policy)
 
+    def residual_bound(self) -> float:
+        """The cap on the root residual's force (x body weight) of whoever drives the humanoid: the
+        tracker's ``tracking.residual_force``, or the policy's own tracker settings at its cap."""
+        if self.controller == "tracker":
+            return self.tracking.residual_force
+        from physmotion.physics.policy import capped_tracking, load_policy
+
+        settings = load_policy(self.policy).settings
+        return capped_tracking(settings.tracking, settings.cap).residual_force
+
     @classmethod
     def sampling(cls, **overrides) -> ProjectionConfig:
         """The preset generation uses (physdiff and post): a fall (error past tau = 0.15 m) puts the

@@ -27,6 +27,13 @@ def test_presets_agree_with_the_config_methods() -> None:
     assert preset("ilc") == ProjectionConfig(ilc_passes=2)
 
 
+def test_residual_bound_is_the_cap_of_whoever_drives() -> None:
+    assert ProjectionConfig().residual_bound() == 0.2
+    assert ProjectionConfig.sampling().residual_bound() == 0.3
+    # the shipped policy brings its own tracker settings at a quarter of their cap (its card: 0.05 W)
+    assert ProjectionConfig.sampling().with_controller("policy").residual_bound() == pytest.approx(0.05)
+
+
 def test_the_tracker_history_changes_one_thing_at_a_time() -> None:
     v01, held = preset("tracker_v01"), preset("plain_held_residual")
     assert not v01.tracking.feet_balance and not v01.shaping.flatten_toe_off and not v01.shaping.ballistic_flight
