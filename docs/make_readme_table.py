@@ -54,10 +54,10 @@ def table(path: Path = DEFAULT) -> str:
     lines.append("")
     sampler = meta["sampler"]
     name = {"dpmpp": "DPM-Solver++", "ddim": "DDIM"}.get(sampler["sampler"], sampler["sampler"])
-    lines.append(f"{meta['motions']} test motions ({meta['data']}) x {meta['repeats']} repeats, the shipped model "
-                 f"and evaluator, sampled with {name} {sampler['steps']} steps, "
-                 f"`{Path(path).relative_to(ROOT).as_posix()}`. The model before it, trained on the mocap "
-                 "alone, is beside it in `results/retrained_default.md`.")
+    lines.append(f"{meta['motions']} test motions ({meta['data']}) x {meta['repeats']} repeats, the default model "
+                 f"(Morph-tuned) and the shipped evaluator, sampled with {name} {sampler['steps']} steps, "
+                 f"`{Path(path).relative_to(ROOT).as_posix()}`; the base model it was tuned from is beside it in "
+                 "`results/morph_retuned.md`.")
     return "\n".join(lines)
 
 

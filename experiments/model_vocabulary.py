@@ -2,10 +2,10 @@
 
 A tool rather than an experiment: it writes into the model folder, not into results/.
 
-    python -m experiments.model_vocabulary --data data_build/all --model physmotion/weights/default
+    python -m experiments.model_vocabulary --data data_build/all --model physmotion/weights/base
 
 `physmotion generate` warns about prompt words outside this file (physmotion/text/vocabulary.py).
---max-frames is the length filter of the training run (the default model's: 196, every window; its
+--max-frames is the length filter of the training run (the base model's: 196, every window; its
 step-8304 predecessor's was 120, when the crop also filtered); the script checks the motion count
 against the model's config.json (info.train_items) and refuses a mismatch, so the file describes what
 the model saw.
@@ -19,7 +19,7 @@ import sys
 from pathlib import Path
 
 from physmotion.conventions import MAX_FRAMES
-from physmotion.diffusion.model import DEFAULT_MODEL_DIR
+from physmotion.diffusion.model import BASE_MODEL_DIR
 from physmotion.errors import PhysmotionError
 from physmotion.text.vocabulary import VOCABULARY_FILE, training_vocabulary, write_vocabulary
 
@@ -27,7 +27,7 @@ from physmotion.text.vocabulary import VOCABULARY_FILE, training_vocabulary, wri
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", required=True, help="the HumanML3D-layout folder the model was trained on")
-    parser.add_argument("--model", default=str(DEFAULT_MODEL_DIR), help="model folder (default: the shipped one)")
+    parser.add_argument("--model", default=str(BASE_MODEL_DIR), help="model folder (default: the shipped base model, trained on the build)")
     parser.add_argument("--max-frames", type=int, default=MAX_FRAMES, help="the run's length filter")
     parser.add_argument("--split", default="train")
     args = parser.parse_args(argv)

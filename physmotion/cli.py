@@ -14,7 +14,7 @@ from rich.table import Table
 
 from physmotion.conventions import FLOOR_JOINTS, FLOOR_SURFACE, FPS, MAX_FRAMES, MAX_TEXT_TOKENS, MIN_FRAMES
 from physmotion.errors import PhysmotionError, PhysmotionWarning
-from physmotion.paths import WEIGHTS_DIR
+from physmotion.paths import DEFAULT_MODEL, WEIGHTS_DIR
 
 # The rig tables' names for `import --rig`'s help (physmotion.io.rigs.RIGS, which imports scipy: not
 # imported for --help; tests/test_cli_cold.py checks the two agree).
@@ -76,6 +76,8 @@ def _warn(message: str) -> None:
 # The options of every command that reads a .bvh (import's own help says more).
 BVH_RIG_HELP = "Rig of .bvh input, as for `import` (guessed if left out)."
 BVH_FPS_HELP = "True frame rate of .bvh input, as for `import`."
+MODEL_HELP = ("Model folder, or a shipped model's name: morph (the default, used if left out) or base (the model "
+              "Morph fine-tuned it from).")
 BVH_MAPPING_HELP = ("JSON file naming the .bvh's joint (or End Site, '<parent>_end') for each of our 22 joints, "
                     "as for `import` (docs/examples/mapping_bandai.json).")
 
@@ -83,11 +85,13 @@ BVH_MAPPING_HELP = ("JSON file naming the .bvh's joint (or End Site, '<parent>_e
 
 
 def _model_dir(model: Path | None) -> Path | None:
-    """A --model as given, or a shipped model's folder where a bare name (``morph``) names one and no
-    folder of that name exists here: model names work from any directory."""
+    """A --model as given, or a shipped model's folder where a bare name (``base``, ``morph``, or
+    ``default`` for the one used without --model) names one and no folder of that name exists here: model
+    names work from any directory."""
     if model is None or model.exists() or len(model.parts) != 1:
         return model
-    shipped = WEIGHTS_DIR / model.name  # diffusion.model.DEFAULT_MODEL_DIR's folder, without torch
+    name = DEFAULT_MODEL if model.name == "default" else model.name
+    shipped = WEIGHTS_DIR / name  # diffusion.model.DEFAULT_MODEL_DIR's folder, without torch
     return shipped if (shipped / "config.json").is_file() else model
 
 
@@ -359,8 +363,7 @@ def refine_cmd(
     strength: float = typer.Option(0.3, help="Share of the diffusion steps to invert, in [0, 1] (0 returns "
                                    "the input on the dataset's skeleton)."),
     text: str = typer.Option("", help="Caption to condition on (default: none)."),
-    model_dir: Path | None = typer.Option(None, "--model", help="Model folder, or a shipped model's name "
-                                          "(default, morph) (default: the shipped model)."),
+    model_dir: Path | None = typer.Option(None, "--model", help=MODEL_HELP),
     steps: int = typer.Option(50, help="DDIM steps of the full schedule."),
     phys_scale: float | None = typer.Option(None, help="BioMoDiffuse models only: physics guidance weight "
                                             "(default: 1)."),
@@ -438,8 +441,7 @@ def generate_cmd(
                                             "0 = without the physical network (default: 1)."),
     speed: float | None = typer.Option(None, help="BioMoDiffuse models only: speed control signal, scales "
                                        "the physical network's accelerations (default: 1)."),
-    model: Path | None = typer.Option(None, help="Model folder, or a shipped model's name (default, morph); "
-                                      "the shipped default model if left out."),
+    model: Path | None = typer.Option(None, help=MODEL_HELP),
     fine_step: bool = typer.Option(False, "--fine-step", help="Simulate the projection at 1/720 s instead "
                                    "of 1/360 s: PhysDiff on unseen prompts 12.5 -> 11.2 mm Phys-Err, for "
                                    "1.3-1.4x PhysDiff's time (experiments/generate_speed.py)."),
@@ -559,7 +561,7 @@ def _check_generate_early(texts, model, prompt_file, prompts, *, seconds, num, p
     if num is not None and not 1 <= num <= 256:
         raise PhysmotionError(f"--num must be between 1 and 256, got {num}")
     try:
-        config = json.loads(((model or WEIGHTS_DIR / "default") / "config.json").read_text(encoding="utf-8"))
+        config = json.loads(((model or WEIGHTS_DIR / DEFAULT_MODEL) / "config.json").read_text(encoding="utf-8"))
         den = config["denoiser"]
         max_frames, arch = int(den.get("max_frames", MAX_FRAMES)), den.get("arch", "transformer")
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
@@ -762,7 +764,7 @@ def train_length_cmd(
 @app.command("evaluate")
 def evaluate_cmd(
     data: Path = typer.Option(..., help="HumanML3D-layout folder to evaluate on."),
-    model: Path | None = typer.Option(None, help="Model folder; the shipped model if left out."),
+    model: Path | None = typer.Option(None, help=MODEL_HELP),
     evaluator: Path | None = typer.Option(None, help="Evaluator folder; the shipped one if left out."),
     split: str | None = typer.Option(None, help="Split to evaluate on (default: test)."),
     physics: str | None = typer.Option(
@@ -796,7 +798,7 @@ def evaluate_cmd(
     modes = tuple(str(m) for m in parse_modes(physics)) if physics is not None else None
     cfg = _with(EvaluateConfig.quick() if quick else EvaluateConfig(), modes=modes, split=split, seed=seed,
                 repeats=None if quick else repeats)
-    net, judge = MotionDiffusion.load(model), Evaluator.load(evaluator)
+    net, judge = MotionDiffusion.load(_model_dir(model)), Evaluator.load(evaluator)
     cfg.base.sampler = _with(default_sampler(net), steps=cfg.base.sampler.steps if quick else steps,
                              sampler=sampler, eta=eta, cfg_scale=cfg_scale)
     cfg.base = cfg.base.with_controller(controller, _opt_str(policy))
@@ -855,8 +857,7 @@ def view_cmd(
 def serve_cmd(
     host: str = typer.Option("127.0.0.1", help="Address to listen on; only this machine reaches 127.0.0.1."),
     port: int = typer.Option(8000, help="Port to listen on (0: any free port; the address is printed)."),
-    model: Path | None = typer.Option(None, help="Model folder, or a shipped model's name (default, morph); "
-                                      "the shipped default model if left out."),
+    model: Path | None = typer.Option(None, help=MODEL_HELP),
     physics: str = typer.Option("physdiff", help="The page's and the JSON endpoint's default physics mode "
                                 "(any of generate's; a request may name another)."),
     waiting: int = typer.Option(4, help="Requests that may wait behind the one being generated; past that the "
@@ -903,7 +904,7 @@ def morph_synth_cmd(
     data: Path = typer.Option(..., help="HumanML3D-layout folder whose train captions are generated."),
     out: Path = typer.Option(..., "-o", "--out", help="Synthetic data folder; an unfinished run of the same "
                              "model and settings there is continued."),
-    model: Path | None = typer.Option(None, help="Model folder; the shipped model if left out."),
+    model: Path | None = typer.Option(None, help=MODEL_HELP),
     per_caption: int | None = typer.Option(None, "--per-caption", help="Samples per train caption (default: 1)."),
     seed: int | None = typer.Option(None, help="Random seed of noise and lengths (default: 0)."),
     workers: int | None = typer.Option(None, help="Physics worker processes (0: one per core) (default: 0)."),
@@ -916,7 +917,7 @@ def morph_synth_cmd(
 
     cfg = _with(SynthConfig(), per_caption=per_caption, seed=seed, workers=workers, ilc_passes=ilc,
                 controller=controller, policy=_opt_str(policy))  # fmt: skip
-    report = synthesize(model, data, out, cfg, progress=sys.stderr.isatty())
+    report = synthesize(_model_dir(model), data, out, cfg, progress=sys.stderr.isatty())
     console.print(f"{out}: {report.done} new item(s), {report.total_done}/{report.planned} done in "
                   f"{report.seconds:.0f} s (sampling {report.sampling_seconds:.0f} s, physics "
                   f"{report.physics_seconds:.0f} s)", highlight=False)  # fmt: skip
@@ -943,7 +944,8 @@ _MIX_HELP = "Share of synthetic motions in each batch; 0: the control on real mo
 
 @morph_app.command("finetune")
 def morph_finetune_cmd(
-    model: Path = typer.Option(..., help="Model folder to fine-tune (the one that made --synth)."),
+    model: Path = typer.Option(..., help="Model folder to fine-tune (the one that made --synth), or a shipped "
+                               "model's name (base, morph)."),
     synth: Path = typer.Option(..., help="Synthetic data folder made by 'physmotion morph synth' with --model."),
     data: Path = typer.Option(..., help="HumanML3D-layout folder whose train split is mixed in."),
     out: Path = typer.Option(..., "-o", "--out", help="Run folder: model, train_state.pt, loss.csv. Must be "
@@ -962,7 +964,7 @@ def morph_finetune_cmd(
     from physmotion.paths import check_output
 
     check_output(out, "folder", overwrite=resume, hint="pass --resume to continue its run, or choose another -o")
-    cfg = _with(FinetuneConfig(model=str(model), synth=str(synth), data=str(data), out=str(out)), mix=mix, lr=lr,
+    cfg = _with(FinetuneConfig(model=str(_model_dir(model)), synth=str(synth), data=str(data), out=str(out)), mix=mix, lr=lr,
                 steps=steps, batch_size=batch_size, tau=tau, seed=seed, floor=floor)  # fmt: skip
     result = finetune(cfg, resume=resume, progress=sys.stderr.isatty())
     c, last = result.selection.counts, result.train.losses[-1][1] if result.train.losses else float("nan")
@@ -975,7 +977,7 @@ def morph_finetune_cmd(
 
 @morph_app.command("run")
 def morph_run_cmd(
-    model: Path = typer.Option(..., help="Model folder of round 1."),
+    model: Path = typer.Option(..., help="Model folder of round 1, or a shipped model's name (base, morph)."),
     data: Path = typer.Option(..., help="HumanML3D-layout folder: its train captions and motions."),
     out: Path = typer.Option(..., "-o", "--out", help="Run folder (round_<k>/synth, round_<k>/model, rounds.md); "
                              "a run from the same model there is continued, finished rounds skipped."),
@@ -995,6 +997,7 @@ def morph_run_cmd(
     from physmotion.paths import check_output
 
     check_output(out, "folder", overwrite=True)
+    model = _model_dir(model)
     check_run_dir(out, model)
     synth_cfg = _with(SynthConfig(), per_caption=per_caption, seed=seed, ilc_passes=ilc)
     ft_cfg = _with(FinetuneConfig(model="", synth="", data=str(data), out=""), steps=steps, mix=mix, lr=lr, seed=seed,

@@ -33,6 +33,7 @@ from physmotion.diffusion.samplers import SamplerConfig
 from physmotion.errors import PhysmotionError
 from physmotion.metrics.report import residual_line
 from physmotion.motion import write_atomic
+from physmotion.paths import DEFAULT_MODEL
 from physmotion.physics.projection import ProjectionConfig
 from physmotion.pipelines.base import Pipeline
 from physmotion.pipelines.modes import FLOOR, MORPH, NONE, PHYSDIFF, POST, PhysicsMode
@@ -331,7 +332,7 @@ def write_outputs(
         "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "prompts": texts,
         "seed": config.seed,
-        "model": str(model) if model is not None else "default (physmotion/weights/default)",
+        "model": str(model) if model is not None else f"default (physmotion/weights/{DEFAULT_MODEL})",
         "pipeline": result.settings.get("pipeline"),  # the class that made the motions (physmotion/pipelines)
         "settings": settings,
         "preview": preview,

@@ -14,8 +14,13 @@ from physmotion.errors import PhysmotionError
 
 OutputKind = Literal["file", "folder"]
 
-# The shipped weights, one folder per model (default, morph, evaluator, imitator, length).
+# The shipped weights, one folder per model (base, morph, evaluator, imitator, length).
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
+# The generator `generate` uses when no --model is given (``--model default`` names it too): the Morph-tuned
+# one, fine-tuned from ``BASE_MODEL`` on physically refined motions (docs/decisions/morph.md: "the Morph-tuned
+# model becomes the default").
+DEFAULT_MODEL = "morph"
+BASE_MODEL = "base"  # the generator trained on the captured data alone, that Morph fine-tunes
 
 
 class OutputPathError(PhysmotionError):

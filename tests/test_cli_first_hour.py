@@ -164,18 +164,20 @@ def test_vocabulary_words_and_unknown_words() -> None:
 
 
 def test_shipped_vocabulary_is_the_training_captions(built_all_dir: Path) -> None:
-    """vocabulary.txt is what experiments/model_vocabulary.py derives from the build the model trained on
-    (mocap and HDM05, every train window)."""
-    from physmotion.diffusion.model import DEFAULT_MODEL_DIR, MotionDiffusion
+    """vocabulary.txt is what experiments/model_vocabulary.py derives from the build the base model trained
+    on (mocap and HDM05, every train window); the default, Morph-tuned from it, has the same words."""
+    from physmotion.diffusion.model import BASE_MODEL_DIR, DEFAULT_MODEL_DIR, MotionDiffusion
     from physmotion.text.vocabulary import load_vocabulary, training_vocabulary
 
-    counts, motions = training_vocabulary(built_all_dir, max_frames=MotionDiffusion.load().trained_max_length)
-    assert motions == MotionDiffusion.load().info["train_items"]
-    shipped = load_vocabulary(DEFAULT_MODEL_DIR)
+    base = MotionDiffusion.load(BASE_MODEL_DIR)
+    counts, motions = training_vocabulary(built_all_dir, max_frames=base.trained_max_length)
+    assert motions == base.info["train_items"]
+    shipped = load_vocabulary(BASE_MODEL_DIR)
+    assert load_vocabulary(DEFAULT_MODEL_DIR) == shipped
     assert shipped == set(counts) and "juggles" not in shipped
     assert {"walk", "kick", "wave", "jump", "squat", "hop", "lie", "throw"} <= shipped  # HDM05's verbs too
     assert '"*/*.txt"' in (Path(__file__).parents[1] / "pyproject.toml").read_text()  # installed with the model
-    assert "vocabulary.txt" in (DEFAULT_MODEL_DIR / "README.md").read_text()
+    assert all("vocabulary.txt" in (d / "README.md").read_text() for d in (BASE_MODEL_DIR, DEFAULT_MODEL_DIR))
 
 
 def test_cli_generate_warns_about_unseen_words_and_records_them(tmp_path: Path) -> None:

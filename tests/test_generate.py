@@ -248,3 +248,20 @@ def test_console_script_generate_morph_writes_the_same_files(tmp_path: Path) -> 
     assert run_log["projections"]["imitation_failures"] in (0, 1)
     assert 0.0 <= run_log["projections"]["imitation_failure_rate"] <= 1.0
     assert isinstance(run_log["motions"][0]["imitation_failed"], bool)
+
+
+def test_shipped_model_names_work_from_any_folder(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--model base``, ``morph`` and ``default`` name the shipped folders wherever the user stands; the
+    default is the Morph-tuned model, and ``generate.json`` records which one made the motions."""
+    from physmotion.cli import _model_dir
+    from physmotion.diffusion.model import BASE_MODEL_DIR, DEFAULT_MODEL_DIR
+
+    monkeypatch.chdir(tmp_path)
+    assert _model_dir(Path("base")) == BASE_MODEL_DIR and _model_dir(Path("morph")) == DEFAULT_MODEL_DIR
+    assert _model_dir(Path("default")) == DEFAULT_MODEL_DIR and DEFAULT_MODEL_DIR.name == "morph"
+    assert _model_dir(None) is None and _model_dir(Path("nosuch")) == Path("nosuch")  # left to the loader's error
+    (tmp_path / "base").mkdir()  # a folder of that name here wins over the shipped one
+    assert _model_dir(Path("base")) == Path("base")
+    res = run("generate", "a person walks forward", "--seconds", "2", "--steps", "2", "--physics", "none",
+              "--model", "nosuch", "-o", tmp_path / "x")  # fmt: skip
+    assert res.returncode == 1 and "nosuch" in res.stderr and "Traceback" not in res.stderr

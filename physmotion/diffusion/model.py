@@ -2,7 +2,8 @@
 
 On disk a model is a folder: ``model.safetensors`` (the EMA weights, plus ``normalizer.mean`` and
 ``normalizer.std``) and ``config.json`` (denoiser and diffusion configs, text encoder, training data and
-its licence tags). The shipped default lives in ``physmotion/weights/default``.
+its licence tags). The shipped default lives in ``physmotion/weights/morph``, the model it was fine-tuned
+from in ``physmotion/weights/base``.
 """
 
 from __future__ import annotations
@@ -18,10 +19,11 @@ from physmotion.nets.denoiser import DenoiserConfig, build_denoiser
 from physmotion.diffusion.schedule import DiffusionConfig
 from physmotion.errors import PhysmotionError
 from physmotion.motion import joined_licence_tag
-from physmotion.paths import WEIGHTS_DIR
+from physmotion.paths import BASE_MODEL, DEFAULT_MODEL, WEIGHTS_DIR
 from physmotion.features.normalize import Normalizer
 
-DEFAULT_MODEL_DIR = WEIGHTS_DIR / "default"
+DEFAULT_MODEL_DIR = WEIGHTS_DIR / DEFAULT_MODEL  # what generate uses without --model
+BASE_MODEL_DIR = WEIGHTS_DIR / BASE_MODEL  # trained on the captured data alone; Morph fine-tuned the default from it
 
 
 @dataclass

@@ -16,11 +16,15 @@ from physmotion.metrics.report import residual_stats
 def reset_columns(results: Sequence[GenerateResult]) -> dict[str, float]:
     """What the falls did to the outputs of projecting modes: ``reset_rate``, the share of output motions
     whose projection put the humanoid back at least once (error past tau, 0.15 m in generation), and
-    ``resets``, the mean number of such jumps per output motion. Empty for modes without P's output."""
+    ``resets``, the mean number of such jumps per output motion; and ``fell``, the share of all of P's
+    projections (PhysDiff's inside sampling too) in which the humanoid fell. Empty for modes without P's
+    output."""
     counts = [m.resets for r in results for m in r.motions if m.resets is not None]
     if not counts:
         return {}
-    return {"reset_rate": float(np.mean([c > 0 for c in counts])), "resets": float(np.mean(counts))}
+    tracked = [t for r in results for t in r.projections.tracked]
+    fell = {"fell": 1.0 - float(np.mean(tracked))} if tracked else {}
+    return {"reset_rate": float(np.mean([c > 0 for c in counts])), "resets": float(np.mean(counts))} | fell
 
 
 def residual_columns(results: Sequence[GenerateResult], bound: float | None = None) -> dict[str, float]:

@@ -63,6 +63,7 @@ GENERATION_COLUMNS = ("R@1", "R@2", "R@3", "FID", "MM-Dist", "Diversity", "MModa
 BETTER = {"R@1": "↑", "R@2": "↑", "R@3": "↑", "FID": "↓", "MM-Dist": "↓", "Diversity": "→", "MModality": "↑",
           "sec/motion": "↓"}  # fmt: skip
 RESET_COLUMNS = {"reset_rate": "reset_rate (share)", "resets": "resets (per motion)",
+                 "fell": "projections that fell (share)",
                  "residual_force": "root force (W)", "residual_force_p95": "root force p95 (W)",
                  "residual_at_cap": "root force at cap (share)",
                  "residual_torque": "root torque (W m)", "residual_torque_p95": "root torque p95 (W m)",

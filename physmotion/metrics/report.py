@@ -18,7 +18,8 @@ from physmotion.errors import PhysmotionError
 from physmotion.metrics.physical import METRICS, RECORDED, format_table
 
 # A frame's root residual force this close to its cap counts as at the cap: the frame value is the mean of
-# its residual updates, so it reaches the cap only when every update was clipped.
+# its residual updates, so it reaches the cap only when every update was clipped (docs/decisions/metrics.md:
+# "frames at the residual's cap and projections that fell").
 AT_CAP = 0.99
 
 

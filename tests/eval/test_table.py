@@ -46,12 +46,15 @@ def test_quick_table_has_every_row_and_metric(quick_table):
     for name in ("post:1", "physdiff:end:1,space:1"):  # P's outputs: their resets and outside help are counted
         row = quick_table.rows[name]
         assert 0 <= row["reset_rate"][0] <= 1 and row["resets"][0] >= 0
+        assert 0 <= row["fell"][0] <= 1
         # the residual is bounded by the sampling preset's caps (0.3 W, 1 W m); a tiny model's motions need it
         assert 0 < row["residual_force"][0] <= row["residual_force_p95"][0] <= 0.3 + 1e-6
         assert 0 < row["residual_torque"][0] <= row["residual_torque_p95"][0] <= 1.0 + 1e-6
         # the share of frames at the 0.3 W cap: some, since the p95 of a tiny model's motions sits there
         at_cap = row["residual_at_cap"][0]
         assert 0 <= at_cap <= 1 and (at_cap > 0.05) == (row["residual_force_p95"][0] > 0.297)
+    # post:1 projects each output once, and a projection that fell is one with a reset
+    assert quick_table.rows["post:1"]["fell"][0] == pytest.approx(quick_table.rows["post:1"]["reset_rate"][0])
     for name in (REAL, "none", "none+floor"):
         row = quick_table.rows[name]
         assert "reset_rate" not in row and "residual_force" not in row and "ifr" not in row
