@@ -279,8 +279,9 @@ def project_motion(
     kept = "simulation kept" if result.selected else "tracking failed: input kept (flagged)"
     if config.ilc_passes:
         kept += f" (pass {int(result.ilc_pass)} of {config.ilc_passes + 1})"
+    helped = residual_line(result.residual, config.residual_bound())
     console.print(f"wrote {out} ({controller}): {kept}; MPJPE mean {1000 * result.mpjpe.mean():.0f} mm, "
-                  f"{residual_line(result.residual, config.residual_bound())} (W: body weight); a joint's torque over its actuator's "
+                  f"{helped} (W: body weight); a joint's torque over its actuator's "
                   f"limit in {100 * result.over_limit.mean():.1f} % of frames", highlight=False)  # fmt: skip
 
 
@@ -964,8 +965,8 @@ def morph_finetune_cmd(
     from physmotion.paths import check_output
 
     check_output(out, "folder", overwrite=resume, hint="pass --resume to continue its run, or choose another -o")
-    cfg = _with(FinetuneConfig(model=str(_model_dir(model)), synth=str(synth), data=str(data), out=str(out)), mix=mix, lr=lr,
-                steps=steps, batch_size=batch_size, tau=tau, seed=seed, floor=floor)  # fmt: skip
+    base = FinetuneConfig(model=str(_model_dir(model)), synth=str(synth), data=str(data), out=str(out))
+    cfg = _with(base, mix=mix, lr=lr, steps=steps, batch_size=batch_size, tau=tau, seed=seed, floor=floor)
     result = finetune(cfg, resume=resume, progress=sys.stderr.isatty())
     c, last = result.selection.counts, result.train.losses[-1][1] if result.train.losses else float("nan")
     data = (f"{result.synthetic_items} synthetic ({c['refined']} refined, {c['input']} input, IFR "

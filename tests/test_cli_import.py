@@ -100,15 +100,16 @@ def test_render_view_refine_take_a_mapping(mocap_dir: Path, tmp_path: Path) -> N
 
 
 def test_shipped_models_by_name_from_any_folder(mocap_dir: Path, tmp_path: Path, monkeypatch) -> None:
-    """``--model morph`` (the shipped Morph model's name) works outside the repository, as ``default`` does."""
+    """``--model base`` (the shipped base model's name) works outside the repository, as ``morph`` and
+    ``default`` (both the default model) do."""
     monkeypatch.chdir(tmp_path)
-    res = run("generate", "a person walks forward", "--model", "morph", "--seconds", "2", "--physics", "none",
+    res = run("generate", "a person walks forward", "--model", "base", "--seconds", "2", "--physics", "none",
               "--steps", "2", "--no-preview", "-o", "out")  # fmt: skip
     assert res.returncode == 0, res.stderr
     log = json.loads((tmp_path / "out" / "generate.json").read_text())
-    assert "morph" in json.dumps(log)
+    assert "weights/base" in log["runs"][-1]["model"]
     walk = mocap_dir / BANDAI_WALK
-    res = run("refine", walk, "--rig", "bandai", "--fps", "30", "--model", "morph", "--strength", "0", "-o", "r.npz")
+    res = run("refine", walk, "--rig", "bandai", "--fps", "30", "--model", "base", "--strength", "0", "-o", "r.npz")
     assert res.returncode == 0, res.stderr
     res = run("generate", "a person walks", "--model", "no_such_model", "--no-preview", "-o", "out2")
     assert res.returncode == 1 and res.stderr.count("\n") == 1 and "no_such_model" in res.stderr

@@ -266,7 +266,8 @@ def _generate(model, captions, items, gen_cfg, batch, tick) -> tuple[list, list,
         bodies += out.bodies
         results.append(out)
         tick(len(joints))
-    columns = reset_columns(results) | residual_columns(results, gen_cfg.residual_bound()) | imitation_columns(results)
+    columns = (reset_columns(results) | residual_columns(results, gen_cfg.residual_bound())
+               | imitation_columns(results))
     return joints, bodies, time.perf_counter() - start, columns
 
 
