@@ -35,7 +35,7 @@ from experiments.prompts import NEW_PROMPTS, PHYSICS_PROMPTS
 from physmotion.conventions import FPS
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.samplers import ddim_50
-from physmotion.eval.physics_columns import imitation_columns, metric_surface, reset_columns
+from physmotion.eval.physics_columns import imitation_columns, metric_surface, reset_columns, residual_columns
 from physmotion.generate import GenerateConfig, generate
 from physmotion.metrics import physical_metrics
 from physmotion.physics.presets import preset
@@ -74,6 +74,7 @@ def compare_modes(
         log = out.projections
         row["tracked"] = float(np.mean(log.tracked)) if log.tracked else float("nan")
         row.update(reset_columns([out]))
+        row.update(residual_columns([out], cfg.residual_bound()))
         row.update(imitation_columns([out]))
         results[str(mode)] = row
     return results
@@ -120,15 +121,18 @@ def _physics_prompts(model: MotionDiffusion, seeds: list[int], base: GenerateCon
     rows = []
     for mode in MODES:
         mean = {k: float(np.mean([r[mode].get(k, np.nan) for r in runs]))
-                for k in (*COLUMNS, "tracked", "reset_rate", "resets", "seconds_per_motion")}  # fmt: skip
+                for k in (*COLUMNS, "tracked", "reset_rate", "resets", "seconds_per_motion", "residual_force",
+                          "residual_at_cap")}  # fmt: skip
         per_seed = "/".join(f"{100 * (r[mode]['phys_err'] / r['none+floor']['phys_err'] - 1):+.1f}" for r in runs)
         changes = [f"{100 * (mean['phys_err'] / ref[b] - 1):+.1f}%" for b in ("none", "none+floor")]
         projected = mode.startswith(("post", "physdiff"))
-        falls = [f"{100 * mean['tracked']:.0f}%", f"{100 * mean['reset_rate']:.0f}%", f"{mean['resets']:.2f}"]
+        falls = [f"{100 * mean['tracked']:.0f}%", f"{100 * mean['reset_rate']:.0f}%", f"{mean['resets']:.2f}",
+                 f"{mean['residual_force']:.3f} ({100 * mean['residual_at_cap']:.0f}%)"]
         rows.append((mode, *(f"{mean[k]:.2f}" for k in COLUMNS), *changes, per_seed,
-                     *(falls if projected else ["-"] * 3), f"{mean['seconds_per_motion']:.2f}"))  # fmt: skip
+                     *(falls if projected else ["-"] * 4), f"{mean['seconds_per_motion']:.2f}"))  # fmt: skip
     header = ("mode", "Penetrate", "Float", "Skate", "Phys-Err", "vs none", "vs none+floor",
-              "per seed (vs none+floor)", "no fall", "reset", "resets", "s/motion")  # fmt: skip
+              "per seed (vs none+floor)", "no fall", "reset", "resets", "root force W (at cap)",
+              "s/motion")  # fmt: skip
     return f"# {title}\n\n{markdown_table(header, rows)}\n", runs, {"prompts": len(prompts), "seconds": base.seconds}
 
 

@@ -25,3 +25,7 @@ def test_physdiff_quality_writes_its_json(tmp_path: Path) -> None:
     (run,) = data["runs"]
     assert set(run) == {"none", "none+floor", "post:1", "post:4", "physdiff:end:4,space:1"}
     assert run["physdiff:end:4,space:1"]["phys_err"] < run["none"]["phys_err"]
+    # P's modes record the outside help: the pelvis residual and the share of frames at its 0.3 W cap
+    for mode in ("post:1", "post:4", "physdiff:end:4,space:1"):
+        assert 0 < run[mode]["residual_force"] <= 0.3 + 1e-6 and 0 <= run[mode]["residual_at_cap"] <= 1
+    assert "residual_force" not in run["none"] and "root force W (at cap)" in res.stdout
