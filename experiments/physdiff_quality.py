@@ -74,7 +74,7 @@ def compare_modes(
         log = out.projections
         row["tracked"] = float(np.mean(log.tracked)) if log.tracked else float("nan")
         row.update(reset_columns([out]))
-        row.update(residual_columns([out], cfg.residual_bound()))
+        row.update(residual_columns([out]))
         row.update(imitation_columns([out]))
         results[str(mode)] = row
     return results
@@ -120,20 +120,39 @@ def _physics_prompts(model: MotionDiffusion, seeds: list[int], base: GenerateCon
     ref = {m: np.mean([r[m]["phys_err"] for r in runs]) for m in ("none", "none+floor")}
     rows = []
     for mode in MODES:
-        mean = {k: float(np.mean([r[mode].get(k, np.nan) for r in runs]))
-                for k in (*COLUMNS, "tracked", "reset_rate", "resets", "seconds_per_motion", "residual_force",
-                          "residual_at_cap")}  # fmt: skip
+        mean = {k: _mean([r[mode].get(k, np.nan) for r in runs])
+                for k in (*COLUMNS, "tracked", "reset_rate", "resets", "seconds_per_motion", *HELP)}  # fmt: skip
         per_seed = "/".join(f"{100 * (r[mode]['phys_err'] / r['none+floor']['phys_err'] - 1):+.1f}" for r in runs)
         changes = [f"{100 * (mean['phys_err'] / ref[b] - 1):+.1f}%" for b in ("none", "none+floor")]
         projected = mode.startswith(("post", "physdiff"))
         falls = [f"{100 * mean['tracked']:.0f}%", f"{100 * mean['reset_rate']:.0f}%", f"{mean['resets']:.2f}",
-                 f"{mean['residual_force']:.3f} ({100 * mean['residual_at_cap']:.0f}%)"]
+                 *_help_cells(mean)]
         rows.append((mode, *(f"{mean[k]:.2f}" for k in COLUMNS), *changes, per_seed,
-                     *(falls if projected else ["-"] * 4), f"{mean['seconds_per_motion']:.2f}"))  # fmt: skip
+                     *(falls if projected else ["-"] * len(falls)), f"{mean['seconds_per_motion']:.2f}"))  # fmt: skip
     header = ("mode", "Penetrate", "Float", "Skate", "Phys-Err", "vs none", "vs none+floor",
-              "per seed (vs none+floor)", "no fall", "reset", "resets", "root force W (at cap)",
-              "s/motion")  # fmt: skip
+              "per seed (vs none+floor)", "no fall", "reset", "resets", *HELP_HEADER, "s/motion")  # fmt: skip
     return f"# {title}\n\n{markdown_table(header, rows)}\n", runs, {"prompts": len(prompts), "seconds": base.seconds}
+
+
+# P's help in the tables (eval.physics_columns.residual_columns): the root residual, its share of frames at
+# the cap, and the frames with a joint over its torque limit.
+HELP = ("residual_force", "residual_force_p95", "residual_at_cap", "residual_torque", "residual_torque_p95",
+        "over_limit")  # fmt: skip
+HELP_HEADER = ("root force W mean / p95 (at cap)", "root torque W m mean / p95", "torque over limit")
+
+
+def _mean(values: list[float]) -> float:
+    """The mean of the finite values (a run in which P made none of a mode's outputs has none); NaN if none."""
+    v = np.asarray(values, dtype=np.float64)
+    return float(v[np.isfinite(v)].mean()) if np.isfinite(v).any() else float("nan")
+
+
+def _help_cells(row: dict[str, float]) -> list[str]:
+    """The HELP_HEADER cells of one row (means over seeds); '-' where P made none of its outputs."""
+    if not np.isfinite(row["residual_force"]):
+        return ["-"] * len(HELP_HEADER)
+    return [f"{row['residual_force']:.3f} / {row['residual_force_p95']:.3f} ({100 * row['residual_at_cap']:.0f}%)",
+            f"{row['residual_torque']:.3f} / {row['residual_torque_p95']:.3f}", f"{100 * row['over_limit']:.1f}%"]
 
 
 def _step(base: GenerateConfig) -> str:
@@ -151,18 +170,18 @@ def _new_prompts(model: MotionDiffusion, seeds: list[int], base: GenerateConfig,
              f"seeds {','.join(map(str, seeds))}, model steps {model.info.get('steps')}")
     rows = []
     for cat, cat_runs in runs.items():
-        mean = {m: {k: float(np.mean([r[m].get(k, np.nan) for r in cat_runs]))
-                    for k in (*COLUMNS, "reset_rate", "imitation_failure_rate", "seconds_per_motion")}
+        mean = {m: {k: _mean([r[m].get(k, np.nan) for r in cat_runs])
+                    for k in (*COLUMNS, "reset_rate", "fell", "imitation_failure_rate", "seconds_per_motion", *HELP)}
                 for m in NEW_SET_MODES}  # fmt: skip
         for mode in NEW_SET_MODES:
             row = mean[mode]
             changes = [f"{100 * (row['phys_err'] / mean[b]['phys_err'] - 1):+.0f}%" for b in ("none", "none+floor")]
             rates = [f"{100 * row[k]:.0f}%" if np.isfinite(row[k]) else "-"
-                     for k in ("reset_rate", "imitation_failure_rate")]  # fmt: skip
-            rows.append((cat, mode, *(f"{row[k]:.2f}" for k in COLUMNS), *changes, *rates,
+                     for k in ("reset_rate", "fell", "imitation_failure_rate")]  # fmt: skip
+            rows.append((cat, mode, *(f"{row[k]:.2f}" for k in COLUMNS), *changes, *rates, *_help_cells(row),
                          f"{row['seconds_per_motion']:.2f}"))
     header = ("category", "mode", "Penetrate", "Float", "Skate", "Phys-Err", "vs none", "vs none+floor",
-              "reset", "imitation failed", "s/motion")  # fmt: skip
+              "reset", "fell", "imitation failed", *HELP_HEADER, "s/motion")  # fmt: skip
     settings = {"set": "new", "prompts": {c: list(p) for c, p in NEW_PROMPTS.items()},
                 "model_info": model.info.get("morph", {})}  # fmt: skip
     return f"# {title}\n\n{markdown_table(header, rows)}\n", runs, settings

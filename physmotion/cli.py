@@ -271,18 +271,17 @@ def project_motion(
     _check_out(out, overwrite)
     motion = Motion.load(path)
     result = project(motion.joints, motion.fps, config)
-    body = result.body if result.selected else None  # the input kept is not the humanoid's motion
-    resets = int(result.resets) if result.selected else None
-    residual = result.residual if result.selected else None
-    replace(motion, joints=result.joints, rotations=None, offsets=None, humanoid=body, resets=resets,
-            residual=residual).save(out)
+    # The input kept is not the humanoid's motion: it carries none of the simulation's records.
+    sim = dict(humanoid=result.body, resets=int(result.resets), residual=result.residual,
+               residual_cap=config.residual_bound(), over_limit=result.over_limit)
+    sim = sim if result.selected else dict.fromkeys(sim)
+    replace(motion, joints=result.joints, rotations=None, offsets=None, **sim).save(out)
     kept = "simulation kept" if result.selected else "tracking failed: input kept (flagged)"
     if config.ilc_passes:
         kept += f" (pass {int(result.ilc_pass)} of {config.ilc_passes + 1})"
-    helped = residual_line(result.residual, config.residual_bound())
+    helped = residual_line(result.residual, config.residual_bound(), result.over_limit)
     console.print(f"wrote {out} ({controller}): {kept}; MPJPE mean {1000 * result.mpjpe.mean():.0f} mm, "
-                  f"{helped} (W: body weight); a joint's torque over its actuator's "
-                  f"limit in {100 * result.over_limit.mean():.1f} % of frames", highlight=False)  # fmt: skip
+                  f"{helped} (W: body weight)", highlight=False)  # fmt: skip
 
 
 @app.command("metrics")
@@ -523,7 +522,7 @@ def generate_cmd(
                           unknown=unknown)
     console.print(f"wrote {len(result.motions)} motion(s) to {out} ({len(paths)} files, run logged in "
                   f"generate.json)", highlight=False)  # fmt: skip
-    phys = physics_summary(result, cfg.residual_bound())
+    phys = physics_summary(result)
     if phys:
         console.print(f"physics: {phys}", highlight=False)
 
@@ -938,6 +937,11 @@ def morph_select_cmd(
                   f"({c['failed']} of {c['grounded']} grounded refinements rejected, {c['episode_failed']} "
                   f"fell); non-grounded captions (kept as input, not in IFR): {c['non_grounded']}",
                   highlight=False)  # fmt: skip
+    if sel.help:
+        h = sel.help
+        console.print(f"P's help on the refined motions: root residual force mean {h['residual_force']:.3f} W, "
+                      f"at its cap in {100 * h['residual_at_cap']:.1f} % of frames; a joint's torque over its "
+                      f"actuator's limit in {100 * h['over_limit']:.1f} % of frames", highlight=False)  # fmt: skip
 
 
 _MIX_HELP = "Share of synthetic motions in each batch; 0: the control on real motions alone (default: 0.1)."

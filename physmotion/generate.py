@@ -31,7 +31,7 @@ from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.physdiff import projection_settings
 from physmotion.diffusion.samplers import SamplerConfig
 from physmotion.errors import PhysmotionError
-from physmotion.metrics.report import residual_line
+from physmotion.metrics.report import pooled_help, residual_line
 from physmotion.motion import write_atomic
 from physmotion.paths import DEFAULT_MODEL
 from physmotion.physics.projection import ProjectionConfig
@@ -67,14 +67,6 @@ class GenerateConfig:
         """This run with every P driven by ``controller`` ("tracker" or "policy"; ``generate --controller``)."""
         return replace(self, projection=self.projection.with_controller(controller, policy),
                        morph_projection=self.morph_projection.with_controller(controller, policy))  # fmt: skip
-
-    def residual_bound(self) -> float | None:
-        """The root residual's force cap (x W) of the P this run applies (``morph_projection`` for morph,
-        ``projection`` for post and physdiff), or None for modes without P."""
-        mode = self.physics.kind
-        if mode == MORPH:
-            return self.morph_projection.residual_bound()
-        return self.projection.residual_bound() if mode in (POST, PHYSDIFF) else None
 
 
 def check_request(texts: Sequence[str], config: GenerateConfig, model: MotionDiffusion) -> int | None:
@@ -255,20 +247,21 @@ def unknown_prompt_words(texts: Sequence[str], model_dir: str | Path) -> dict[st
     return {t: w for t, w in found.items() if w}
 
 
-def physics_summary(result: GenerateResult, bound: float | None = None) -> str:
-    """The projections' falls and resets in plain words, for the end of a run ('' without projections);
-    ``bound``, the root residual's force cap (x W), adds the share of frames at it."""
+def physics_summary(result: GenerateResult) -> str:
+    """The projections' falls and resets, and the outside help P gave (the root residual, the share of
+    frames at its cap, joints over their torque limit), in plain words for the end of a run ('' without
+    projections)."""
     log = result.projections
     if not log.tracked:
         return ""
+    pooled = pooled_help(result.motions)
+    helped = f"; {residual_line(*pooled)} (W: body weight)" if pooled else ""
     if result.imitation_failed:  # morph: a failed imitation keeps the sampled motion, nothing is reset
         n, failed = len(result.imitation_failed), int(sum(result.imitation_failed))
         return (f"the simulated humanoid imitated {n - failed} of {n} motions; "
                 + (f"the other {failed} kept the sampled motion (Morph's imitation selection; imitation "
-                   f"failure rate {failed / n:.2f})" if failed else "none was kept as sampled"))
+                   f"failure rate {failed / n:.2f})" if failed else "none was kept as sampled") + helped)
     falls, resets = len(log.tracked) - sum(log.tracked), sum(result.resets)
-    residuals = [m.residual for m in result.motions if m.residual is not None]
-    helped = f"; {residual_line(np.concatenate(residuals), bound)} (W: body weight)" if residuals else ""
     if not falls:
         return f"the simulated humanoid followed the motion without falling in all {len(log.tracked)} " \
             f"projections{helped}"

@@ -32,6 +32,10 @@ class Motion:
     residual: (T, 2) float32, for P's output the root residual it applied in each frame: force in body
     weights, torque in body weight x 1 m (``ProjectedMotion.residual_force`` / ``residual_torque``);
     None where P was not applied.
+    residual_cap: the force cap (x body weight) of the P that made it, so that a reader can tell the frames
+    at the cap (:func:`physmotion.metrics.report.residual_stats`); None where P was not applied.
+    over_limit: (T,) bool, for P's output the frames in which a joint's torque passed its actuator's limit
+    (``ProjectedMotion.over_limit``); None where P was not applied.
     """
 
     joints: np.ndarray
@@ -44,6 +48,8 @@ class Motion:
     humanoid: np.ndarray | None = None
     resets: int | None = None
     residual: np.ndarray | None = None
+    residual_cap: float | None = None
+    over_limit: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if np.asarray(self.joints).dtype.kind not in "fiu":
@@ -63,6 +69,13 @@ class Motion:
             if self.residual.shape != (self.num_frames, 2) or not np.all(np.isfinite(self.residual)):
                 shape = self.residual.shape
                 raise ShapeError(f"residual must be finite (T, 2) = ({self.num_frames}, 2), got {shape}")
+        if self.residual_cap is not None and not (np.isfinite(self.residual_cap) and self.residual_cap >= 0):
+            raise ShapeError(f"residual_cap must be a finite number >= 0, got {self.residual_cap}")
+        if self.over_limit is not None:
+            self.over_limit = np.asarray(self.over_limit)
+            if self.over_limit.shape != (self.num_frames,) or self.over_limit.dtype != bool:
+                shape, dtype = self.over_limit.shape, self.over_limit.dtype
+                raise ShapeError(f"over_limit must be bool (T,) = ({self.num_frames},), got {dtype} {shape}")
 
     @property
     def num_frames(self) -> int:
@@ -83,8 +96,8 @@ class Motion:
         return replace(self, rotations=rot.astype(np.float32), offsets=offsets.astype(np.float32))
 
     def save(self, path: str | Path) -> None:
-        """Write an .npz (joints, rotations, offsets, humanoid, resets, residual, fps, text, licence_tag)
-        atomically."""
+        """Write an .npz (joints, rotations, offsets, humanoid, resets, residual, residual_cap, over_limit,
+        fps, text, licence_tag) atomically."""
         arrays: dict[str, np.ndarray] = {
             "joints": self.joints,
             "fps": np.float32(self.fps),
@@ -102,6 +115,10 @@ class Motion:
             arrays["resets"] = np.int64(self.resets)
         if self.residual is not None:
             arrays["residual"] = np.asarray(self.residual, dtype=np.float32)
+        if self.residual_cap is not None:
+            arrays["residual_cap"] = np.float64(self.residual_cap)
+        if self.over_limit is not None:
+            arrays["over_limit"] = np.asarray(self.over_limit, dtype=bool)
         write_atomic(path, lambda f: np.savez(f, **arrays))
 
     @classmethod
@@ -131,6 +148,8 @@ class Motion:
                     humanoid=data["humanoid"] if "humanoid" in data else None,
                     resets=int(data["resets"]) if "resets" in data else None,
                     residual=data["residual"] if "residual" in data else None,
+                    residual_cap=float(data["residual_cap"]) if "residual_cap" in data else None,
+                    over_limit=data["over_limit"] if "over_limit" in data else None,
                 )
                 _check_pose_arrays(motion, path)
                 return motion

@@ -137,6 +137,10 @@ def test_project_writes_the_simulated_motion(mocap_dir: Path, tmp_path: Path) ->
     shown = json.loads(res.stdout)["files"][0]["metrics"]
     assert shown["residual_force"] == pytest.approx(float(projected.residual[:, 0].mean()), rel=1e-5)
     assert shown["residual_force_p95"] >= shown["residual_force"]
+    # The file records the plain preset's 0.2 W cap and the torque-limit flags: `metrics` gives both shares.
+    assert projected.residual_cap == pytest.approx(0.2) and projected.over_limit.shape == (60,)
+    assert shown["residual_at_cap"] == pytest.approx(float(np.mean(projected.residual[:, 0] >= 0.99 * 0.2)))
+    assert shown["over_limit"] == pytest.approx(float(projected.over_limit.mean()))
     assert "residual_force" not in json.loads(run("metrics", npz, "--json").stdout)["files"][0]["metrics"]
     # Iterative learning control keeps the pass closest to the input: never further than the plain one.
     plain_mm = int(re.search(r"MPJPE mean (\d+) mm", run("project", npz, "-o", out, "--overwrite").stdout)[1])

@@ -126,12 +126,24 @@ def test_at_fine_step_halves_every_projections_step() -> None:
     assert (fine.physics, fine.seed, fine.sampler) == (config.physics, config.seed, config.sampler)
 
 
-def test_residual_bound_follows_the_mode() -> None:
-    assert GenerateConfig(physics="none").residual_bound() is None
-    assert GenerateConfig(physics="none+floor").residual_bound() is None
-    assert GenerateConfig(physics="post:2").residual_bound() == GenerateConfig().projection.residual_bound() == 0.3
-    assert GenerateConfig(physics="physdiff").residual_bound() == 0.3
-    assert GenerateConfig(physics="morph").residual_bound() == 0.2  # Morph's P is the plain one
+def test_projected_motions_record_their_cap_and_torque_limits(tiny_model) -> None:
+    """Each of P's outputs records the force cap of the P that made it (the sampling preset's 0.3 W for
+    post and physdiff, the plain 0.2 W for morph) and its frames over the torque limit, so that a reader
+    of the file alone can tell the share at the cap; motions P did not make record neither."""
+    from physmotion.metrics.report import residual_summary
+
+    for physics, cap in (("post:1", 0.3), ("physdiff:end:2,space:1", 0.3), ("morph", 0.2)):
+        out = generate(["a person walks"], _cfg(physics=physics, num=2), tiny_model)
+        for m in out.motions:
+            if m.residual is None:  # morph's selection kept the sampled motion
+                assert m.residual_cap is None and m.over_limit is None
+                continue
+            assert m.residual_cap == pytest.approx(cap) and m.over_limit.shape == (m.num_frames,)
+            row = residual_summary(m)
+            assert row["residual_at_cap"] == pytest.approx(np.mean(m.residual[:, 0] >= 0.99 * cap))
+            assert row["over_limit"] == pytest.approx(m.over_limit.mean())
+    plain = generate(["a person walks"], _cfg(), tiny_model).motions[0]
+    assert plain.residual_cap is None and plain.over_limit is None and residual_summary(plain) == {}
 
 
 def test_cli_generate_fine_step_is_another_projection_and_is_logged(tiny_model_dir: Path, tmp_path: Path) -> None:

@@ -48,6 +48,24 @@ def test_the_residual_travels_with_the_motion(tmp_path: Path) -> None:
         Motion(_standing(), residual=np.full((10, 2), np.nan))
 
 
+def test_the_cap_and_torque_limit_flags_travel_with_the_motion(tmp_path: Path) -> None:
+    """The force cap of the P that made a motion and its frames over the torque limit are saved and read
+    back exactly; a cap that is not a number >= 0 or flags of the wrong shape or type are refused."""
+    over = np.arange(10) % 3 == 0
+    Motion(_standing(), residual=np.zeros((10, 2)), residual_cap=0.3, over_limit=over).save(tmp_path / "p.npz")
+    back = Motion.load(tmp_path / "p.npz")
+    assert back.residual_cap == 0.3 and np.array_equal(back.over_limit, over)
+    plain = tmp_path / "plain.npz"
+    Motion(_standing()).save(plain)
+    assert Motion.load(plain).residual_cap is None and Motion.load(plain).over_limit is None
+    for bad in (-0.1, float("nan")):
+        with pytest.raises(ShapeError, match="residual_cap"):
+            Motion(_standing(), residual_cap=bad)
+    for bad in (over[:9], over.astype(np.float32)):
+        with pytest.raises(ShapeError, match="over_limit"):
+            Motion(_standing(), over_limit=bad)
+
+
 @pytest.mark.parametrize(
     "joints, message",
     [(np.zeros((5, 21, 3)), "shape"), (np.zeros((0, 22, 3)), "zero frames"),

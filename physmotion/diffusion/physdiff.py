@@ -68,6 +68,7 @@ class Projected:
     bodies: list[np.ndarray]  # (22, 3) the humanoid body each was simulated with
     resets: list[int]  # times the humanoid was put back onto the motion (a jump in the output)
     residuals: list[np.ndarray]  # (T_i, 2) the root residual it used (ProjectedMotion.residual)
+    over_limit: list[np.ndarray]  # (T_i,) bool, a joint's torque past its actuator's limit
     selected: list[bool]  # the simulation was returned (not the input)
     tracked: list[bool]  # ... and the humanoid never fell (no reset)
     mpjpe_mm: list[float]  # mean distance to the input
@@ -115,7 +116,7 @@ class FeatureProjector:
         through in one batch."""
         n = len(joints)
         done = Projected(joints=[np.empty(0)] * n, bodies=[np.empty(0)] * n, resets=[0] * n,
-                         residuals=[np.empty(0)] * n, selected=[False] * n, tracked=[False] * n,
+                         residuals=[np.empty(0)] * n, over_limit=[np.empty(0, bool)] * n, selected=[False] * n, tracked=[False] * n,
                          mpjpe_mm=[0.0] * n, residual_force=[0.0] * n)  # fmt: skip
         by_len: dict[int, list[int]] = {}
         for i, j in enumerate(joints):
@@ -124,7 +125,7 @@ class FeatureProjector:
             res = project(np.stack([joints[i] for i in idx]), self.fps, self.config)
             for k, i in enumerate(idx):
                 done.joints[i], done.bodies[i], done.resets[i] = res.joints[k], res.body[k], int(res.resets[k])
-                done.residuals[i] = res.residual[k]
+                done.residuals[i], done.over_limit[i] = res.residual[k], res.over_limit[k]
                 done.selected[i], done.tracked[i] = bool(res.selected[k]), bool(res.success[k])
                 done.mpjpe_mm[i] = float(1000 * res.mpjpe[k].mean())
                 done.residual_force[i] = float(res.residual_force[k].mean())

@@ -10,7 +10,7 @@ import numpy as np
 
 from physmotion.errors import PhysmotionError
 from physmotion.generate import GenerateResult
-from physmotion.metrics.report import residual_stats
+from physmotion.metrics.report import help_stats
 
 
 def reset_columns(results: Sequence[GenerateResult]) -> dict[str, float]:
@@ -27,13 +27,13 @@ def reset_columns(results: Sequence[GenerateResult]) -> dict[str, float]:
     return {"reset_rate": float(np.mean([c > 0 for c in counts])), "resets": float(np.mean(counts))} | fell
 
 
-def residual_columns(results: Sequence[GenerateResult], bound: float | None = None) -> dict[str, float]:
-    """The root residual P applied to its outputs, over every frame of them: ``residual_force`` and
-    ``residual_force_p95`` (x body weight), ``residual_torque`` and ``residual_torque_p95`` (x body weight x
-    1 m); with ``bound`` (P's force cap, x W) ``residual_at_cap``, the share of frames at it. A motion
-    Morph's selection kept as sampled has none. Empty for modes without P's output."""
-    residuals = [m.residual for r in results for m in r.motions if m.residual is not None]
-    return residual_stats(np.concatenate(residuals), bound) if residuals else {}
+def residual_columns(results: Sequence[GenerateResult]) -> dict[str, float]:
+    """The help P gave its outputs, over every frame of them (:func:`~physmotion.metrics.report.help_stats`):
+    ``residual_force`` and ``residual_force_p95`` (x body weight), ``residual_torque`` and
+    ``residual_torque_p95`` (x body weight x 1 m), ``residual_at_cap`` (the share of frames at the force's
+    cap) and ``over_limit`` (the share with a joint's torque over its actuator's limit). A motion Morph's
+    selection kept as sampled has none. Empty for modes without P's output."""
+    return help_stats([m for r in results for m in r.motions])
 
 
 def imitation_columns(results: Sequence[GenerateResult]) -> dict[str, float]:

@@ -396,9 +396,13 @@ RECORDED: dict[str, MetricInfo] = {
                    "mean root residual torque the projection applied, in body weight x 1 m"),
         MetricInfo("residual_torque_p95", "x W m", "PhysDiff (RFC)", "frames", 0, "lower",
                    "95th percentile over frames of the root residual torque"),
+        MetricInfo("residual_at_cap", "share", "PhysDiff (RFC)", "frames", 0, "lower",
+                   "share of frames whose root residual force is at the cap the file records"),
+        MetricInfo("over_limit", "share", "-", "frames", 0, "lower",
+                   "share of frames in which a joint's torque passed its actuator's limit"),
     )
 }
-"""Values a projected motion file records (``Motion.residual``) rather than metrics of its joints; the
+"""Values a projected motion file records (``Motion.residual``, ``residual_cap``, ``over_limit``) rather than metrics of its joints; the
 metrics tables show them after :data:`METRICS`."""
 
 

@@ -101,12 +101,36 @@ def to_csv(results: Mapping[str, Mapping[str, float]], paths: Sequence[str | Pat
 
 
 def residual_summary(motion) -> dict[str, float]:
-    """The root residual a projected :class:`~physmotion.motion.Motion` records (``Motion.residual``) as
-    metrics rows: mean and 95th percentile force (x W) and torque (x W x 1 m); {} for a motion P did not
-    make."""
-    if motion.residual is None:
+    """What a projected :class:`~physmotion.motion.Motion` records of P's help as metrics rows
+    (:func:`help_stats`); {} for a motion P did not make."""
+    return help_stats([motion])
+
+
+def help_stats(motions: Sequence) -> dict[str, float]:
+    """P's help over every frame of the projected motions among ``motions``: the root residual's mean and
+    95th percentile force (x W) and torque (x W x 1 m); the share of frames at the force's cap where the
+    motions record one cap (``residual_at_cap``); the share of frames with a joint's torque over its
+    actuator's limit where they record it (``over_limit``). {} where none was projected."""
+    pooled = pooled_help(motions)
+    if pooled is None:
         return {}
-    return residual_stats(motion.residual)
+    residual, cap, over = pooled
+    return residual_stats(residual, cap) | ({} if over is None else {"over_limit": float(over.mean())})
+
+
+def pooled_help(motions: Sequence) -> tuple[np.ndarray, float | None, np.ndarray | None] | None:
+    """The records of P's help pooled over the projected motions among ``motions`` (those with
+    ``Motion.residual``): root residual (N, 2); the force cap they share (None where one records none or
+    they differ); over-limit flags (N,) bool (None unless every one records them). None where none was
+    projected."""
+    done = [m for m in motions if m.residual is not None]
+    if not done:
+        return None
+    caps = {m.residual_cap for m in done}
+    cap = caps.pop() if len(caps) == 1 else None
+    flags = [m.over_limit for m in done]
+    over = None if any(f is None for f in flags) else np.concatenate(flags)
+    return np.concatenate([m.residual for m in done]), cap, over
 
 
 def residual_stats(residual: np.ndarray, bound: float | None = None) -> dict[str, float]:
@@ -121,10 +145,13 @@ def residual_stats(residual: np.ndarray, bound: float | None = None) -> dict[str
     return out
 
 
-def residual_line(residual: np.ndarray, bound: float | None = None) -> str:
-    """One plain line for a CLI summary: the root residual's mean and p95, force and torque, and with
-    ``bound`` (the force's cap, x W) the share of frames at it."""
+def residual_line(residual: np.ndarray, bound: float | None = None, over_limit: np.ndarray | None = None) -> str:
+    """One plain line for a CLI summary: the root residual's mean and p95, force and torque; with ``bound``
+    (the force's cap, x W) the share of frames at it; with ``over_limit`` (frames,) bool the share of frames
+    with a joint's torque over its actuator's limit."""
     s = residual_stats(residual, bound)
     cap = "" if bound is None else f", at its {bound:.2f} W cap in {100 * s['residual_at_cap']:.1f} % of frames"
+    over = "" if over_limit is None else \
+        f"; a joint's torque over its actuator's limit in {100 * np.mean(over_limit):.1f} % of frames"
     return (f"root residual force mean {s['residual_force']:.3f} W, p95 {s['residual_force_p95']:.3f} W{cap}; "
-            f"torque mean {s['residual_torque']:.3f} W m, p95 {s['residual_torque_p95']:.3f} W m")
+            f"torque mean {s['residual_torque']:.3f} W m, p95 {s['residual_torque_p95']:.3f} W m{over}")

@@ -21,6 +21,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
+import numpy as np
+
 from physmotion.errors import PhysmotionError
 from physmotion.physics.projection import ProjectionConfig
 
@@ -31,6 +33,8 @@ SYNTH_INFO = "synth.json"
 INDEX = "index.csv"
 INDEX_FIELDS = ("id", "caption", "frames", "mpjpe_mean", "mpjpe_max", "success", "resets", "grounded",
                 "licence_tag")  # fmt: skip
+# P's help per item (shares and mean over its frames): written since these columns exist, optional to read.
+HELP_FIELDS = ("residual_force", "residual_at_cap", "over_limit")
 REFINED_DIR, INPUT_DIR = "new_joint_vecs", "input_joint_vecs"
 
 Source = Literal["refined", "input"]
@@ -62,6 +66,9 @@ class Selection:
     grounded item). counts: "items", "refined", "input", "grounded", "non_grounded", "failed"
     (grounded items whose refinement was rejected), "episode_failed" (grounded items that did not run to
     the end). licence_tags: the distinct licence tags of the items (plus the generator's, from synth.json).
+    help: P's help on the refined items, over their frames (``HELP_FIELDS``: root residual force mean in
+    body weights, share of frames at its cap, share with a joint over its torque limit); {} where the
+    index does not record it.
     """
 
     items: list[SelectedItem] = field(default_factory=list)
@@ -69,6 +76,7 @@ class Selection:
     counts: dict[str, int] = field(default_factory=dict)
     licence_tags: list[str] = field(default_factory=list)
     tau: float = TAU
+    help: dict[str, float] = field(default_factory=dict)
 
     def training_items(self) -> list[tuple[str, Path, str]]:
         """(id, features path, caption) of every selected item, for fine-tuning.
@@ -129,6 +137,7 @@ def select_rows(rows: Iterable[Mapping[str, object]], synth_dir: str | Path = ".
     counts = dict.fromkeys(("items", "refined", "input", "grounded", "non_grounded", "failed",
                             "episode_failed"), 0)  # fmt: skip
     tags = {t for t in extra_tags if t}
+    helped: list[tuple[float, list[float]]] = []  # (frames, HELP_FIELDS) of refined items that record them
     for row in rows:
         try:
             item_id, caption = str(row["id"]), str(row["caption"])
@@ -151,10 +160,17 @@ def select_rows(rows: Iterable[Mapping[str, object]], synth_dir: str | Path = ".
             counts["non_grounded"] += 1
         source: Source = "refined" if imitated and grounded else "input"
         counts[source] += 1
+        if source == "refined" and all(row.get(k) not in (None, "") for k in HELP_FIELDS):
+            helped.append((float(row.get("frames") or 1), [float(row[k]) for k in HELP_FIELDS]))
         folder = REFINED_DIR if source == "refined" else INPUT_DIR
         items.append(SelectedItem(item_id, synth_dir / folder / f"{item_id}.npy", caption, source))
     ifr = counts["failed"] / counts["grounded"] if counts["grounded"] else 0.0
-    return Selection(items=items, ifr=ifr, counts=counts, licence_tags=sorted(tags), tau=tau)
+    help_ = {}
+    if helped:
+        frames = np.array([f for f, _ in helped])
+        values = np.average(np.array([v for _, v in helped]), axis=0, weights=frames)
+        help_ = dict(zip(HELP_FIELDS, map(float, values)))
+    return Selection(items=items, ifr=ifr, counts=counts, licence_tags=sorted(tags), tau=tau, help=help_)
 
 
 def select(synth_dir: str | Path, tau: float = TAU) -> Selection:

@@ -38,9 +38,10 @@ from physmotion.diffusion.model import DEFAULT_MODEL_DIR, MotionDiffusion
 from physmotion.diffusion.samplers import SamplerConfig, ddim_50, sample
 from physmotion.errors import PhysmotionError
 from physmotion.features.humanml3d import FEATURE_DIM, extract_features, recover_from_ric
+from physmotion.metrics.report import residual_stats
 from physmotion.morph.captions import is_grounded
 from physmotion.morph.preprocess import PreprocessConfig, preprocess
-from physmotion.morph.selection import INDEX, INDEX_FIELDS, SYNTH_INFO, TAU, read_index
+from physmotion.morph.selection import HELP_FIELDS, INDEX, INDEX_FIELDS, SYNTH_INFO, TAU, read_index
 from physmotion.motion import write_atomic
 from physmotion.physics.projection import ProjectionConfig, project
 from physmotion.physics.workers import map_in_workers
@@ -236,7 +237,7 @@ def _save_npy(path: Path, array: np.ndarray) -> None:
 def _write_index(out: Path, rows: list[dict]) -> None:
     """The whole index.csv, atomically: a reader never sees a half row."""
     buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=list(INDEX_FIELDS), lineterminator="\n")
+    writer = csv.DictWriter(buf, fieldnames=[*INDEX_FIELDS, *HELP_FIELDS], lineterminator="\n")
     writer.writeheader()
     writer.writerows(rows)
     data = buf.getvalue().encode("utf-8")
@@ -249,11 +250,13 @@ def refine_item(joints: np.ndarray, preprocess_config: PreprocessConfig,
 
     Runs in a worker process (numpy, scipy and MuJoCo only). Returns input_joints (T, 22, 3),
     input_vecs (T-1, 263), sim_joints (T, 22, 3) (always the simulation), sim_vecs (T-1, 263), float32,
-    and mpjpe_mean, mpjpe_max (m), success, resets.
+    and mpjpe_mean, mpjpe_max (m), success, resets, and P's help (``HELP_FIELDS``): residual_force (mean,
+    x W), residual_at_cap and over_limit (shares of frames).
     """
     x = preprocess(joints, preprocess_config)
     result = project(x, fps=FPS, config=projection)
     sim = result.simulated.astype(np.float32)
+    helped = residual_stats(result.residual, projection.residual_bound())
     return {
         "input_joints": x,
         "input_vecs": extract_features(x)[0],
@@ -263,6 +266,9 @@ def refine_item(joints: np.ndarray, preprocess_config: PreprocessConfig,
         "mpjpe_max": float(result.mpjpe.max()),
         "success": bool(result.success),
         "resets": int(result.resets),
+        "residual_force": helped["residual_force"],
+        "residual_at_cap": helped["residual_at_cap"],
+        "over_limit": float(np.mean(result.over_limit)),
     }
 
 
@@ -386,6 +392,7 @@ def _write_item(out: Path, item: PlannedItem, res: dict, licence_tag: str) -> di
         "mpjpe_mean": f"{res['mpjpe_mean']:.6f}", "mpjpe_max": f"{res['mpjpe_max']:.6f}",
         "success": int(res["success"]), "resets": int(res["resets"]),
         "grounded": int(is_grounded(item.caption)), "licence_tag": licence_tag,
+        **{k: f"{res[k]:.6f}" for k in HELP_FIELDS},
     }  # fmt: skip
 
 

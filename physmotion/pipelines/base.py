@@ -26,13 +26,15 @@ Progress = Callable[[int, int], None]
 @dataclass
 class Physical:
     """The motions after a method's physics, per motion: joints (T, 22, 3); the humanoid body (22, 3) they
-    are the simulation (or surface) of, or None; resets and root residual (T, 2) of that simulation."""
+    are the simulation (or surface) of, or None; resets, root residual (T, 2) and frames with a joint's
+    torque over its actuator's limit (T,) bool of that simulation (``over_limit``: empty without one)."""
 
     joints: list[np.ndarray]
     bodies: list[np.ndarray | None]
     resets: list[int]
     residuals: list[np.ndarray | None]
     failed: list[bool] = field(default_factory=list)  # Morph's imitation selection kept the input
+    over_limit: list[np.ndarray | None] = field(default_factory=list)
 
     @classmethod
     def kinematic(cls, joints: list[np.ndarray]) -> Physical:
@@ -75,12 +77,14 @@ class Pipeline:
         joints = [recover_from_ric(f.astype(np.float64)) for f in feats]
         after = (lambda k: on_step(self.sampler.steps + k, total)) if on_step else None
         done = self._after(joints, log, after) if last is None else last
+        over = done.over_limit or [None] * len(prompts)
+        cap = self.projection.residual_bound() if self.projects else None
         motions = [
             Motion(joints=j, fps=FPS, texts=[p], licence_tag=self.model.licence_tag,
                    source=f"physmotion generate ({self.name})", humanoid=b,
-                   resets=r if self.projects and b is not None else None,
-                   residual=res if self.projects and b is not None else None)
-            for j, p, b, r, res in zip(done.joints, prompts, done.bodies, done.resets, done.residuals)
+                   **(dict(resets=r, residual=res, residual_cap=cap, over_limit=o)
+                      if self.projects and b is not None else {}))
+            for j, p, b, r, res, o in zip(done.joints, prompts, done.bodies, done.resets, done.residuals, over)
         ]  # fmt: skip
         return GenerateResult(motions=motions, features=list(feats), projections=log, resets=list(done.resets),
                               imitation_failed=done.failed, lengths=lengths, settings=self.settings())  # fmt: skip

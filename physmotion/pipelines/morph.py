@@ -42,7 +42,8 @@ class MorphPipeline(Pipeline):
         # not simulated on a body, so it has none.
         out = Physical(joints=[floor_first_frame(j, physical=True) if f else j for j, f in zip(done.joints, failed)],
                        bodies=[None if f else b for b, f in zip(done.bodies, failed)], resets=done.resets,
-                       residuals=[None if f else r for r, f in zip(done.residuals, failed)], failed=failed)  # fmt: skip
+                       residuals=[None if f else r for r, f in zip(done.residuals, failed)], failed=failed,
+                       over_limit=[None if f else o for o, f in zip(done.over_limit, failed)])  # fmt: skip
         if on_projection:
             on_projection(1)
         return out

@@ -19,7 +19,8 @@ from physmotion.pipelines.modes import DEFAULT_SCHEDULE, PhysicsMode
 
 
 def _physical(done: Projected) -> Physical:
-    return Physical(done.joints, list(done.bodies), done.resets, list(done.residuals))
+    return Physical(done.joints, list(done.bodies), done.resets, list(done.residuals),
+                    over_limit=list(done.over_limit))
 
 
 class PhysDiffPipeline(Pipeline):

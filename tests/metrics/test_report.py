@@ -1,11 +1,12 @@
-"""The root residual as reports give it: mean and 95th percentile of force and torque."""
+"""P's help as reports give it: the root residual's mean and 95th percentile of force and torque, the
+share of frames at its cap, and the frames with a joint over its torque limit."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from physmotion.metrics.report import residual_line, residual_stats, residual_summary
+from physmotion.metrics.report import help_stats, residual_line, residual_stats, residual_summary
 from physmotion.motion import Motion
 
 
@@ -34,3 +35,30 @@ def test_residual_summary_of_a_motion() -> None:
     assert residual_summary(Motion(joints=joints)) == {}
     m = Motion(joints=joints, residual=np.full((10, 2), 0.05, np.float32))
     assert residual_summary(m)["residual_torque_p95"] == pytest.approx(0.05)
+
+
+def test_residual_summary_reads_the_cap_and_torque_limits_the_file_records() -> None:
+    joints = np.zeros((4, 22, 3), np.float32)
+    force = np.array([0.3, 0.3, 0.1, 0.0], np.float32)
+    m = Motion(joints=joints, residual=np.stack([force, force], -1), residual_cap=0.3,
+               over_limit=np.array([True, False, False, False]))
+    row = residual_summary(m)
+    assert row["residual_at_cap"] == pytest.approx(0.5) and row["over_limit"] == pytest.approx(0.25)
+    line = residual_line(m.residual, m.residual_cap, m.over_limit)
+    assert "cap in 50.0 % of frames" in line and "actuator's limit in 25.0 % of frames" in line
+
+
+def test_help_pooled_over_motions() -> None:
+    """Every frame of every projected motion counts; a motion without P's records is left out; the share
+    at the cap needs one cap for all, the over-limit share flags from all."""
+    joints = np.zeros((2, 22, 3), np.float32)
+    a = Motion(joints=joints, residual=np.full((2, 2), 0.2, np.float32), residual_cap=0.2,
+               over_limit=np.array([True, True]))
+    b = Motion(joints=joints, residual=np.zeros((2, 2), np.float32), residual_cap=0.2,
+               over_limit=np.array([False, False]))
+    row = help_stats([a, b, Motion(joints=joints)])
+    assert row["residual_force"] == pytest.approx(0.1)
+    assert row["residual_at_cap"] == pytest.approx(0.5) and row["over_limit"] == pytest.approx(0.5)
+    other_cap = Motion(joints=joints, residual=np.zeros((2, 2), np.float32), residual_cap=0.3)
+    assert "residual_at_cap" not in help_stats([a, other_cap]) and "over_limit" not in help_stats([a, other_cap])
+    assert help_stats([Motion(joints=joints)]) == {}

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from physmotion.errors import PhysmotionError
-from physmotion.morph.selection import INDEX_FIELDS, read_synth_info, select, select_rows
+from physmotion.morph.selection import HELP_FIELDS, INDEX_FIELDS, read_synth_info, select, select_rows
 
 
 def row(i: int, mpjpe: float, success: int = 1, grounded: int = 1, caption: str = "a person walks") -> dict:
@@ -38,6 +38,18 @@ def test_selection_rule_and_ifr(tmp_path: Path) -> None:
     assert sel.licence_tags == ["NC"]
     ids = [i for i, _, _ in sel.training_items()]
     assert ids == [f"s{i:06d}" for i in range(6)]
+
+
+def test_help_on_the_refined_items_over_their_frames(tmp_path: Path) -> None:
+    """P's help is averaged over the refined items' frames; inputs kept do not count; an index made before
+    the help columns (or a row without them) gives none."""
+    rows = [row(0, 0.05) | {"frames": "60", "residual_force": "0.1", "residual_at_cap": "0.0", "over_limit": "0.5"},
+            row(1, 0.05) | {"frames": "20", "residual_force": "0.2", "residual_at_cap": "1.0", "over_limit": "0.0"},
+            row(2, 0.9) | {"frames": "60", "residual_force": "0.3", "residual_at_cap": "1.0", "over_limit": "1.0"}]
+    sel = select_rows(rows, tmp_path)
+    assert sel.help == pytest.approx({"residual_force": 0.125, "residual_at_cap": 0.25, "over_limit": 0.375})
+    assert select_rows(ROWS, tmp_path).help == {}
+    assert set(HELP_FIELDS) == set(sel.help)
 
 
 def test_tau_moves_the_cut(tmp_path: Path) -> None:
@@ -84,3 +96,14 @@ def test_cli_select(tmp_path: Path) -> None:
     res = CliRunner().invoke(app, ["morph", "select", str(folder)])
     assert res.exit_code == 0, res.output
     assert "2 refined" in res.output and "IFR 0.600" in res.output and "non-grounded" in res.output
+    assert "P's help" not in res.output  # this index predates the help columns
+    helped = [r | {"residual_force": "0.1", "residual_at_cap": "0.2", "over_limit": "0.0"} for r in ROWS]
+    folder = tmp_path / "with_help"
+    folder.mkdir()
+    (folder / "synth.json").write_text("{}")
+    fields = [*INDEX_FIELDS, *HELP_FIELDS]
+    lines = [",".join(fields)] + [",".join(str(r[k]) for k in fields) for r in helped]
+    (folder / "index.csv").write_text("\n".join(lines) + "\n")
+    res = CliRunner().invoke(app, ["morph", "select", str(folder)])
+    assert res.exit_code == 0, res.output
+    assert "root residual force mean 0.100 W, at its cap in 20.0 % of frames" in res.output

@@ -15,7 +15,7 @@ from physmotion.diffusion.samplers import SamplerConfig
 from physmotion.errors import PhysmotionError
 from physmotion.features.humanml3d import extract_features
 from physmotion.morph.preprocess import correct_tilt, tilt_angle
-from physmotion.morph.selection import INDEX_FIELDS, select
+from physmotion.morph.selection import HELP_FIELDS, INDEX_FIELDS, select
 from physmotion.morph.synth import SUBDIRS, SynthConfig, split_lengths, synthesize
 
 CAPTIONS = ["a person walks forward", "a person jumps", "a person sits on a chair", "a person waves"]
@@ -58,7 +58,7 @@ def test_layout(full: Path) -> None:
     assert (info["feature_dim"], info["skeleton"], info["fps"], info["tau"]) == (263, "smpl22", 20, 0.5)
     assert info["projection"]["reset_on_fail"] is False and info["items_planned"] == 4
     rows = index_rows(full)
-    assert list(rows[0]) == list(INDEX_FIELDS)
+    assert list(rows[0]) == [*INDEX_FIELDS, *HELP_FIELDS]
     assert [r["id"] for r in rows] == ["s000000", "s000001", "s000002", "s000003"]
     assert [r["caption"] for r in rows] == CAPTIONS
     assert [r["grounded"] for r in rows] == ["1", "1", "0", "1"]
@@ -75,8 +75,12 @@ def test_layout(full: Path) -> None:
             np.testing.assert_allclose(feats, extract_features(joints)[0], atol=1e-5)
         assert (full / "texts" / f"{sid}.txt").read_text() == f"{r['caption']}##0.0#0.0\n"
         assert 0 <= float(r["mpjpe_mean"]) <= float(r["mpjpe_max"])
+        # P's help: the plain preset's residual, under its 0.2 W cap, and shares of frames
+        assert 0 < float(r["residual_force"]) <= 0.2 + 1e-6
+        assert 0 <= float(r["residual_at_cap"]) <= 1 and 0 <= float(r["over_limit"]) <= 1
     sel = select(full)
     assert sel.counts["items"] == 4 and sel.counts["non_grounded"] == 1
+    assert set(sel.help) == (set(HELP_FIELDS) if sel.counts["refined"] else set())
 
 
 def test_same_seed_same_files(model, built_dir: Path, full: Path, tmp_path: Path) -> None:
