@@ -87,6 +87,19 @@ def _load_npz(payload: bytes) -> Motion:
         return Motion.load(path)
 
 
+def test_projected_motion_answers_the_help_it_got(client: TestClient) -> None:
+    """A mode with P answers the outside help it gave, as `metrics` reads it from the served file; plain
+    sampling answers none."""
+    from physmotion.metrics.report import residual_summary
+
+    got = client.post("/api/generate", json={"text": WALK, "physics": "post:1", "seconds": 2.0}).json()
+    motion = _load_npz(client.get(got["files"]["npz"]).content)
+    assert motion.residual_cap == pytest.approx(0.3)
+    assert got["help"] == pytest.approx(residual_summary(motion))
+    assert {"residual_force", "residual_at_cap", "over_limit"} <= set(got["help"])
+    assert client.post("/api/generate", json={"text": WALK, **QUICK}).json()["help"] == {}
+
+
 def test_defaults_the_page_and_health(client: TestClient) -> None:
     res = client.post("/api/generate", json={"text": WALK})  # physics and seconds from ServeConfig
     assert res.status_code == 200 and res.json()["physics"] == "none" and res.json()["frames"] == 40

@@ -12,7 +12,9 @@ Routes:
   ``physmotion view``, in an iframe; downloads). Only local assets: the vendored three.js is inlined.
 - ``POST /api/generate``: ``{"text": str, "physics": str, "seconds": float | null, "seed": int}`` ->
   ``{"id", "text", "physics", "seconds", "seed", "fps", "frames", "joints": (T, 22, 3) list in metres,
-  "licence_tag", "resets", "length_source", "queued_s", "generate_s", "files": {"npz", "bvh", "view"}}``.
+  "licence_tag", "resets", "help", "length_source", "queued_s", "generate_s", "files": {"npz", "bvh",
+  "view"}}``. ``help``: the outside help P gave the motion (:func:`physmotion.metrics.report.help_stats`:
+  root residual, share of frames at its cap, share over a joint's torque limit); {} without P.
   ``seconds`` null: the length is predicted from the text. The same request gives the same joints as
   ``physmotion generate`` with the same options and model.
 - ``GET /api/motions/{id}.npz`` and ``.bvh``: the motion's files; ``GET /motions/{id}``: its viewer page.
@@ -48,6 +50,7 @@ from starlette.exceptions import HTTPException
 
 from physmotion.conventions import FPS, MIN_FRAMES
 from physmotion.errors import PhysmotionError
+from physmotion.metrics.report import help_stats
 from physmotion.motion import Motion
 
 if TYPE_CHECKING:
@@ -311,6 +314,7 @@ def _answer(mid: str, served: _Served) -> dict[str, Any]:
         "joints": np.round(motion.joints, 4).tolist(),
         "licence_tag": motion.licence_tag,
         "resets": motion.resets,
+        "help": help_stats([motion]),
         "length_source": served.length_source,
         "queued_s": round(served.queued_s, 3),
         "generate_s": round(served.generate_s, 3),
