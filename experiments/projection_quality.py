@@ -29,6 +29,7 @@ from experiments._results import markdown_table, run_meta, write_results
 from physmotion.io.importer import ClipInfo, import_clip, load_manifest
 from physmotion.metrics import physical_metrics
 from physmotion.metrics.physical import skate_factors
+from physmotion.metrics.report import AT_CAP
 from physmotion.physics.presets import preset, preset_names
 from physmotion.physics.projection import ProjectedMotion, ProjectionConfig, project
 from physmotion.physics.surface import HumanoidSurface, ground_on_surface
@@ -118,12 +119,13 @@ def _measure_clip(info: ClipInfo, config: ProjectionConfig | None) -> ClipProjec
 SUMMARY_METRICS = ("penetrate", "float", "skate", "phys_err")
 
 
-def summarize(measured: list[ClipProjection]) -> dict[str, float]:
+def summarize(measured: list[ClipProjection], bound: float | None = None) -> dict[str, float]:
     """One row over clips: ``clips``, ``success`` (share), ``mpjpe_mm`` (mean over all clips), the metrics of
     input and output (``<metric>_in`` / ``_out``, mm, means over clips), airborne shares of input and
     output, Skate's two factors (``contact_in/out``, ``slide_in/out``: ``metrics.physical.skate_factors``,
-    means over clips), and the residual force and torque (mean over all frames, p95 over all frames;
-    x W, x W m)."""
+    means over clips), the residual force and torque (mean over all frames, p95 over all frames;
+    x W, x W m), ``over_limit`` (the share of frames with a joint's torque over its actuator's limit) and,
+    with ``bound`` (P's force cap, x W), ``residual_at_cap`` (the share of frames at it)."""
     if not measured:
         return {"clips": 0}
     force = np.concatenate([m.result.residual_force for m in measured])
@@ -145,22 +147,26 @@ def summarize(measured: list[ClipProjection]) -> dict[str, float]:
         "slide_out": float(np.mean([m.contact_after[1] for m in measured])),
         "residual_force_mean": float(force.mean()), "residual_force_p95": float(np.percentile(force, 95)),
         "residual_torque_mean": float(torque.mean()), "residual_torque_p95": float(np.percentile(torque, 95)),
+        "over_limit": float(np.mean(np.concatenate([m.result.over_limit for m in measured]))),
     }
+    if bound is not None:
+        row["residual_at_cap"] = float(np.mean(force >= AT_CAP * bound))
     return row
 
 
-def by_category(clips: list[ClipInfo], measured: list[ClipProjection]) -> dict[str, dict[str, float]]:
-    """:func:`summarize` per category (:func:`category`, in the order of :data:`CATEGORIES`, then "other",
+def by_category(clips: list[ClipInfo], measured: list[ClipProjection],
+                bound: float | None = None) -> dict[str, dict[str, float]]:  # fmt: skip
+    """:func:`summarize` (with P's force cap ``bound``) per category (:func:`category`, in the order of :data:`CATEGORIES`, then "other",
     then "walks+runs": :func:`locomotion_clips`' rule, the set the residual target speaks of, where there
     are any; then "all"). Categories without clips are left out."""
     groups: dict[str, list[ClipProjection]] = {name: [] for name in (*CATEGORIES, "other")}
     for info, m in zip(clips, measured):
         groups[category(info.captions)].append(m)
-    rows = {name: summarize(ms) for name, ms in groups.items() if ms}
+    rows = {name: summarize(ms, bound) for name, ms in groups.items() if ms}
     locomotion = [m for info, m in zip(clips, measured) if LOCOMOTION.search(info.captions[0].lower())]
     if locomotion:
-        rows["walks+runs"] = summarize(locomotion)
-    rows["all"] = summarize(measured)
+        rows["walks+runs"] = summarize(locomotion, bound)
+    rows["all"] = summarize(measured, bound)
     return rows
 
 
@@ -168,7 +174,7 @@ def category_table(rows: dict[str, dict[str, float]]) -> str:
     """:func:`by_category`'s rows as one Markdown table."""
     header = ("category", "clips", "success", "MPJPE mm", "Penetrate in→out", "Float in→out", "Skate in→out",
               "Phys-Err in→out", "airborne in→out", "feet touching in→out", "slide per touch in→out",
-              "residual F mean / p95 (W)", "residual τ mean / p95 (W m)")  # fmt: skip
+              "residual F mean / p95 (W) (at cap)", "residual τ mean / p95 (W m)", "torque over limit")  # fmt: skip
     lines = []
     for name, r in rows.items():
         cells = [name, str(r["clips"]), f"{100 * r['success']:.1f} %", f"{r['mpjpe_mm']:.1f}"]
@@ -176,8 +182,10 @@ def category_table(rows: dict[str, dict[str, float]]) -> str:
         cells += [f"{100 * r['airborne_in']:.1f} → {100 * r['airborne_out']:.1f} %",
                   f"{100 * r['contact_in']:.1f} → {100 * r['contact_out']:.1f} %",
                   f"{r['slide_in']:.1f} → {r['slide_out']:.1f}",
-                  f"{r['residual_force_mean']:.3f} / {r['residual_force_p95']:.3f}",
-                  f"{r['residual_torque_mean']:.3f} / {r['residual_torque_p95']:.3f}"]  # fmt: skip
+                  f"{r['residual_force_mean']:.3f} / {r['residual_force_p95']:.3f}"
+                  + (f" ({100 * r['residual_at_cap']:.0f} %)" if "residual_at_cap" in r else ""),
+                  f"{r['residual_torque_mean']:.3f} / {r['residual_torque_p95']:.3f}",
+                  f"{100 * r['over_limit']:.1f} %" if "over_limit" in r else "-"]  # fmt: skip
         lines.append(cells)
     return markdown_table(header, lines)
 
@@ -199,9 +207,10 @@ def main(argv: list[str] | None = None) -> None:
     clips = locomotion_clips(args.mocap) if args.walks_runs else load_manifest(args.mocap)
     clips = clips[: args.limit] if args.limit else clips
     start = time.perf_counter()
-    measured = measure_clips(clips, preset(args.preset))  # one worker process per core
+    config = preset(args.preset)
+    measured = measure_clips(clips, config)  # one worker process per core
     seconds = time.perf_counter() - start
-    rows = by_category(clips, measured)
+    rows = by_category(clips, measured, config.residual_bound())
     failed = [c.clip for c, m in zip(clips, measured) if not m.result.success]
     md = (f"# P on {len(clips)} captured clips by category (preset {args.preset}, {seconds:.0f} s)\n\n"
           f"{category_table(rows)}\n\nfailed: {', '.join(failed) or '-'}\n")

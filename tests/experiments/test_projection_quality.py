@@ -57,11 +57,18 @@ def test_by_category_summarises_measured_clips(mocap_dir) -> None:
     clips = {c.clip: c for c in load_manifest(mocap_dir)}
     chosen = [clips[n] for n in ("bandai2_dataset-2_walk_normal_001", "bandai2_dataset-2_run_feminine_001",
                                  "cmubvh_131_03")]  # fmt: skip
-    rows = by_category(chosen, measure_clips(chosen))
+    measured = measure_clips(chosen)
+    rows = by_category(chosen, measured, bound=0.2)
     assert [k for k in rows] == ["jump", "run", "walk", "walks+runs", "all"]
     assert rows["all"]["clips"] == 3 and rows["walks+runs"]["clips"] == 2
+    force = np.concatenate([m.result.residual_force for m in measured])
+    over = np.concatenate([m.result.over_limit for m in measured])
+    assert rows["all"]["residual_at_cap"] == pytest.approx(np.mean(force >= 0.99 * 0.2))
+    assert rows["all"]["over_limit"] == pytest.approx(over.mean())
+    assert "residual_at_cap" not in by_category(chosen, measured)["all"]  # no cap given, no share at it
     for row in rows.values():
         assert 0.0 <= row["success"] <= 1.0 and row["mpjpe_mm"] > 0
+        assert 0.0 <= row["residual_at_cap"] <= 1.0 and 0.0 <= row["over_limit"] <= 1.0
         assert row["residual_force_p95"] >= row["residual_force_mean"] >= 0.0
         assert 0.0 <= row["airborne_out"] <= 1.0
         assert 0.0 <= row["contact_out"] <= 1.0 and row["slide_out"] >= 0.0
