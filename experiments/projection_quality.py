@@ -156,9 +156,9 @@ def summarize(measured: list[ClipProjection], bound: float | None = None) -> dic
 
 def by_category(clips: list[ClipInfo], measured: list[ClipProjection],
                 bound: float | None = None) -> dict[str, dict[str, float]]:  # fmt: skip
-    """:func:`summarize` (with P's force cap ``bound``) per category (:func:`category`, in the order of :data:`CATEGORIES`, then "other",
-    then "walks+runs": :func:`locomotion_clips`' rule, the set the residual target speaks of, where there
-    are any; then "all"). Categories without clips are left out."""
+    """:func:`summarize` (with P's force cap ``bound``) per category (:func:`category`, in the order of
+    :data:`CATEGORIES`, then "other", then "walks+runs": :func:`locomotion_clips`' rule, the set the
+    residual target speaks of, where there are any; then "all"). Categories without clips are left out."""
     groups: dict[str, list[ClipProjection]] = {name: [] for name in (*CATEGORIES, "other")}
     for info, m in zip(clips, measured):
         groups[category(info.captions)].append(m)

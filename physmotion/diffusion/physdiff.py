@@ -116,8 +116,9 @@ class FeatureProjector:
         through in one batch."""
         n = len(joints)
         done = Projected(joints=[np.empty(0)] * n, bodies=[np.empty(0)] * n, resets=[0] * n,
-                         residuals=[np.empty(0)] * n, over_limit=[np.empty(0, bool)] * n, selected=[False] * n, tracked=[False] * n,
-                         mpjpe_mm=[0.0] * n, residual_force=[0.0] * n)  # fmt: skip
+                         residuals=[np.empty(0)] * n, over_limit=[np.empty(0, bool)] * n,
+                         selected=[False] * n, tracked=[False] * n, mpjpe_mm=[0.0] * n,
+                         residual_force=[0.0] * n)  # fmt: skip
         by_len: dict[int, list[int]] = {}
         for i, j in enumerate(joints):
             by_len.setdefault(len(j), []).append(i)

@@ -402,8 +402,8 @@ RECORDED: dict[str, MetricInfo] = {
                    "share of frames in which a joint's torque passed its actuator's limit"),
     )
 }
-"""Values a projected motion file records (``Motion.residual``, ``residual_cap``, ``over_limit``) rather than metrics of its joints; the
-metrics tables show them after :data:`METRICS`."""
+"""Values a projected motion file records (``Motion.residual``, ``residual_cap``, ``over_limit``) rather
+than metrics of its joints; the metrics tables show them after :data:`METRICS`."""
 
 
 def _aggregate(name: str, values: np.ndarray, lengths: np.ndarray) -> float:
