@@ -26,6 +26,11 @@ def test_physdiff_quality_writes_its_json(tmp_path: Path) -> None:
     assert set(run) == {"none", "none+floor", "post:1", "post:4", "physdiff:end:4,space:1"}
     assert run["physdiff:end:4,space:1"]["phys_err"] < run["none"]["phys_err"]
     # P's modes record the outside help: the pelvis residual and the share of frames at its 0.3 W cap
+    # and torque, and the frames with a joint over its torque limit (none: this preset balances by the root)
     for mode in ("post:1", "post:4", "physdiff:end:4,space:1"):
         assert 0 < run[mode]["residual_force"] <= 0.3 + 1e-6 and 0 <= run[mode]["residual_at_cap"] <= 1
-    assert "residual_force" not in run["none"] and "root force W (at cap)" in res.stdout
+        assert run[mode]["residual_torque_p95"] >= run[mode]["residual_torque"] > 0
+        assert run[mode]["over_limit"] == 0.0
+    assert "residual_force" not in run["none"]
+    for column in ("root force W mean / p95 (at cap)", "root torque W m mean / p95", "torque over limit"):
+        assert column in res.stdout
