@@ -161,7 +161,7 @@ def select_rows(rows: Iterable[Mapping[str, object]], synth_dir: str | Path = ".
         source: Source = "refined" if imitated and grounded else "input"
         counts[source] += 1
         if source == "refined" and all(row.get(k) not in (None, "") for k in HELP_FIELDS):
-            helped.append((float(row.get("frames") or 1), [float(row[k]) for k in HELP_FIELDS]))
+            helped.append((float(row["frames"]), [float(row[k]) for k in HELP_FIELDS]))
         folder = REFINED_DIR if source == "refined" else INPUT_DIR
         items.append(SelectedItem(item_id, synth_dir / folder / f"{item_id}.npy", caption, source))
     ifr = counts["failed"] / counts["grounded"] if counts["grounded"] else 0.0
