@@ -279,6 +279,8 @@ def project_motion(
     kept = "simulation kept" if result.selected else "tracking failed: input kept (flagged)"
     if config.ilc_passes:
         kept += f" (pass {int(result.ilc_pass)} of {config.ilc_passes + 1})"
+    if config.reset_on_fail:  # a preset that puts the fallen humanoid back on the motion (a jump in the output)
+        kept += f", the humanoid put back onto the motion {int(result.resets)} time(s)"
     helped = residual_line(result.residual, config.residual_bound(), result.over_limit)
     console.print(f"wrote {out} ({controller}): {kept}; MPJPE mean {1000 * result.mpjpe.mean():.0f} mm, "
                   f"{helped} (W: body weight)", highlight=False)  # fmt: skip

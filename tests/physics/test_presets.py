@@ -71,7 +71,8 @@ def test_project_takes_a_preset_by_name(mocap_dir, tmp_path) -> None:
     Motion(joints=motion.joints[:40], fps=20).save(tmp_path / "walk.npz")
     res = invoke("project", tmp_path / "walk.npz", "-o", tmp_path / "out.npz", "--preset", "sampling")
     assert res.returncode == 0, res.stderr
-    assert Motion.load(tmp_path / "out.npz").resets is not None
+    resets = Motion.load(tmp_path / "out.npz").resets
+    assert resets is not None and f"put back onto the motion {resets} time(s)" in res.stdout
     res = invoke("project", tmp_path / "walk.npz", "-o", tmp_path / "bad.npz", "--preset", "fast")
     assert res.returncode == 1 and "unknown projection preset 'fast'; known: plain, sampling" in res.stderr
     assert len(res.stderr.strip().splitlines()) == 1
