@@ -230,8 +230,12 @@ def export_motion(
     console.print(f"wrote {out}", highlight=False)
 
 
-CONTROLLER_HELP = ("Who drives the simulated humanoid: 'tracker' (the model-based tracker) or 'policy' (the "
-                   "learned imitation policy over it, physmotion train imitator).")
+CONTROLLER_HELP = ("Who drives the simulated humanoid: 'tracker' (the model-based tracker, with a bounded outside "
+                   "hand on the pelvis), 'policy' (the learned imitation policy over it, physmotion train "
+                   "imitator) or 'search' (no outside hand at all: the body's own joint targets searched; "
+                   "seconds of CPU per second of motion).")
+EFFORT_HELP = ("With --controller search: 'fast', 'default' or 'best' (more candidates, a longer lookahead; "
+               "costs in results/search_quality.md).")
 POLICY_HELP = "With --controller policy: the policy folder (the shipped one if left out)."
 
 
@@ -253,6 +257,11 @@ def project_motion(
                                    "9.7 mm), for twice the simulation steps; results/projection_dynamic.md."),
     controller: str = typer.Option("tracker", help=CONTROLLER_HELP),
     policy: Path | None = typer.Option(None, help=POLICY_HELP),
+    effort: str = typer.Option("default", help=EFFORT_HELP),
+    seed: int = typer.Option(0, help="With --controller search: the seed of its random candidates."),
+    teacher: Path | None = typer.Option(None, help="With --controller search: also write the search's teacher "
+                                        "records (.npz: per control step, the observation a policy sees and the "
+                                        "joint-target offsets chosen) to this file."),
     preset_name: str = typer.Option("plain", "--preset", help="P's preset by name (physmotion/physics/presets.py; "
                                     "docs/cli.md lists them): 'plain' keeps the input where the imitation fails, "
                                     "'sampling' is generation's P; --ilc and --fine-step apply on top."),
@@ -265,17 +274,29 @@ def project_motion(
     from physmotion.physics.presets import preset
     from physmotion.physics.projection import project
 
-    config = preset(preset_name).with_controller(controller, _opt_str(policy))
+    from physmotion.physics.search import effort as search_effort
+
+    if teacher is not None and controller != "search":
+        raise PhysmotionError("--teacher needs --controller search: only the search makes teacher records")
+    search = search_effort(effort, seed) if controller == "search" else None
+    config = preset(preset_name).with_controller(controller, _opt_str(policy), search)
     config = replace(config, ilc_passes=ilc) if ilc else config
     config = config.at_fine_step() if fine_step else config
     _check_out(out, overwrite)
+    if teacher is not None:
+        _check_out(teacher, overwrite)
     motion = Motion.load(path)
-    result = project(motion.joints, motion.fps, config)
+    with _step_bar(f"projecting {path.name} ({controller}), control steps") as tick:
+        result = project(motion.joints, motion.fps, config, on_step=tick)
     # The input kept is not the humanoid's motion: it carries none of the simulation's records.
     sim = dict(humanoid=result.body, resets=int(result.resets), residual=result.residual,
                residual_cap=config.residual_bound(), over_limit=result.over_limit)
     sim = sim if result.selected else dict.fromkeys(sim)
     replace(motion, joints=result.joints, rotations=None, offsets=None, **sim).save(out)
+    if teacher is not None:
+        from physmotion.physics.search import save_teacher
+
+        save_teacher(teacher, result, motion)
     kept = "simulation kept" if result.selected else "tracking failed: input kept (flagged)"
     if config.ilc_passes:
         kept += f" (pass {int(result.ilc_pass)} of {config.ilc_passes + 1})"
@@ -595,12 +616,19 @@ def _step_bar(label: str):
     """A context manager yielding tick(done, total) that drives a rich progress bar (silent if not a TTY)."""
     from contextlib import contextmanager
 
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
     @contextmanager
     def bar():
         progress = Progress(TextColumn(label), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                            console=Console(stderr=True), disable=not sys.stderr.isatty())
+                            TimeRemainingColumn(), console=Console(stderr=True), disable=not sys.stderr.isatty())
         with progress:
             task = progress.add_task(label, total=None)
             yield lambda done, total: progress.update(task, completed=done, total=total)

@@ -15,6 +15,8 @@ against that raised reference.
 
 from __future__ import annotations
 
+import os
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from functools import lru_cache, partial
 
@@ -27,11 +29,12 @@ from physmotion.features.biomech import FEATURE_DIM_BIOMECH, to_263
 from physmotion.features.humanml3d import FEATURE_DIM, recover_from_ric
 from physmotion.physics.humanoid import HumanoidConfig, body_from_joints, build_model, foot_lift
 from physmotion.physics.retarget import joints_to_qpos, qpos_to_joints
+from physmotion.physics.search import SearchConfig, SearchController
 from physmotion.physics.shaping import ShapingConfig, shape_reference
 from physmotion.physics.surface import body_lowest, pose_frames
 from physmotion.physics.sim import Rollout, simulate
 from physmotion.physics.tracking import ModelBasedTracker, TrackingConfig, prepare_reference
-from physmotion.physics.workers import map_in_workers
+from physmotion.physics.workers import map_in_workers, worker_count
 from physmotion.skeleton import NUM_JOINTS
 
 
@@ -76,26 +79,34 @@ class ProjectionConfig:
     # Who drives the humanoid: the model-based tracker, or the learned imitation policy over it
     # (physics/policy.py), loaded from ``policy`` (a folder; None: the shipped one). The policy brings its
     # own tracker settings and residual cap; ``tracking`` applies to the tracker only.
+    # "search": no outside hand at all, the body's own joint targets searched (physics/search.py), at the
+    # effort of ``search``; slow (seconds per second of motion), for offline projection and Morph's data.
     controller: str = "tracker"
     policy: str | None = None
+    search: SearchConfig = field(default_factory=SearchConfig)
 
     def __post_init__(self) -> None:
         if not (isinstance(self.ilc_passes, int) and 0 <= self.ilc_passes <= 20):
             raise ShapeError(f"ilc_passes must be an integer in 0..20, got {self.ilc_passes}")
         if not 0.0 < self.ilc_gain <= 1.0:
             raise ShapeError(f"ilc_gain must be in (0, 1], got {self.ilc_gain}")
-        if self.controller not in ("tracker", "policy"):
-            raise ShapeError(f"controller must be 'tracker' or 'policy', got {self.controller!r}")
+        if self.controller not in CONTROLLERS:
+            raise ShapeError(f"controller must be one of {', '.join(CONTROLLERS)}, got {self.controller!r}")
         if self.ilc_passes and self.reset_on_fail:  # a reset or a moved reference is no error to learn from
             raise ShapeError("ilc_passes needs the plain projection (reset_on_fail off)")
 
-    def with_controller(self, controller: str, policy: str | None = None) -> ProjectionConfig:
-        """This P driven by ``controller`` ("tracker" or "policy", the latter loaded from ``policy``)."""
-        return replace(self, controller=controller, policy=policy)
+    def with_controller(self, controller: str, policy: str | None = None,
+                        search: SearchConfig | None = None) -> ProjectionConfig:  # fmt: skip
+        """This P driven by ``controller`` ("tracker", "policy" loaded from ``policy``, or "search" at the
+        effort ``search``, the default one if None)."""
+        return replace(self, controller=controller, policy=policy, search=search or self.search)
 
     def residual_bound(self) -> float:
         """The cap on the root residual's force (x body weight) of whoever drives the humanoid: the
-        tracker's ``tracking.residual_force``, or the policy's own tracker settings at its cap."""
+        tracker's ``tracking.residual_force``, the policy's own tracker settings at its cap, or 0 for the
+        search (no outside hand)."""
+        if self.controller == "search":
+            return 0.0
         if self.controller == "tracker":
             return self.tracking.residual_force
         from physmotion.physics.policy import capped_tracking, load_policy
@@ -143,6 +154,9 @@ class ProjectionConfig:
         return replace(self, humanoid=replace(h, sim_dt=h.sim_dt / 2, residual_every=2 * h.residual_every))
 
 
+CONTROLLERS = ("tracker", "policy", "search")
+
+
 @dataclass
 class ProjectedMotion:
     """The result of :func:`project` for a batch of B motions of T frames at the input fps.
@@ -166,6 +180,9 @@ class ProjectedMotion:
     over_limit: (B, T) bool, frames in which a hinge's total torque (actuator plus the joint torques the
     tracker's feet-balance path applies directly) passed the actuator's force limit: the actuators alone
     are bounded, that path is not (:func:`~physmotion.physics.sim.control_step`).
+    teacher_obs, teacher_offsets: with the search controller only, per control step of the simulation
+    (B, N, 599) float32 the observation a policy would see (:func:`physmotion.physics.policy.observe`, cap
+    0) and (B, N, 63) the joint-target offsets the search committed (rad): a policy's teacher labels.
     """
 
     joints: np.ndarray
@@ -181,6 +198,8 @@ class ProjectedMotion:
     grounded: np.ndarray
     ilc_pass: np.ndarray
     over_limit: np.ndarray
+    teacher_obs: np.ndarray | None = None
+    teacher_offsets: np.ndarray | None = None
 
     @property
     def residual(self) -> np.ndarray:
@@ -233,18 +252,27 @@ def project(
     motion: np.ndarray,
     fps: float = FPS,
     config: ProjectionConfig | None = None,
+    on_step: Callable[[int, int], None] | None = None,
 ) -> ProjectedMotion:
     """PhysDiff's projection P of a motion or a batch (joints or un-normalised features).
 
     motion: (T, 22, 3) / (B, T, 22, 3) joints, metres, Y up, floor at the lowest joint, or HumanML3D
     features (T, 263|329) / (B, T, 263|329). fps: its frame rate. Deterministic: the same input gives
     the same output, and a batch gives what its motions give one by one.
+    on_step(done, total): progress over control steps, for the search controller on a single motion (the
+    slow case; a batch's motions run in worker processes, which report nothing).
     """
     cfg = config or ProjectionConfig()
     joints, batched = as_joints(motion)
     if not fps > 0:
         raise ShapeError(f"fps must be positive, got {fps}")
-    outs = map_in_workers(partial(_project_one, fps=fps, config=cfg), list(joints), cfg.workers)
+    if cfg.controller == "search" and not cfg.search.threads:  # the search's threads share the cores
+        per_worker = max(1, (os.cpu_count() or 1) // worker_count(cfg.workers, len(joints)))
+        cfg = replace(cfg, search=replace(cfg.search, threads=per_worker))
+    if len(joints) == 1 and on_step is not None:
+        outs = [_project_one(joints[0], fps, cfg, on_step)]
+    else:
+        outs = map_in_workers(partial(_project_one, fps=fps, config=cfg), list(joints), cfg.workers)
     stacked = {k: np.stack([o[k] for o in outs]) for k in outs[0]}
     result = ProjectedMotion(**stacked)
     if not batched:
@@ -295,11 +323,14 @@ def _policy(path: str | None):
     return load_policy(path)
 
 
-def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig) -> dict[str, np.ndarray]:
+def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig,
+                 on_step: Callable[[int, int], None] | None = None) -> dict[str, np.ndarray]:  # fmt: skip
     """P of one motion x (T, 22, 3) float64: the fields of :class:`ProjectedMotion` for it."""
     ctrl_fps = 1.0 / config.humanoid.control_dt
     prep = prepare_motion(x, fps, config)
     body, model, lift, target, grounded = prep.body, prep.model, prep.lift, prep.target, prep.grounded
+    if config.controller == "search":
+        return _search_one(prep, x, fps, config, on_step)
     tracker = _controller(model, config)  # holds no episode state: one serves every pass
     reference, best = target, None
     for ilc_pass in range(config.ilc_passes + 1):
@@ -316,6 +347,20 @@ def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig) -> dict[st
             reference = reference.copy()
             reference[:, :3] += config.ilc_gain * (target[:, :3] - roll.qpos[:, :3])
     return best[1] | {"body": body, "grounded": np.array(grounded)}
+
+
+def _search_one(prep: PreparedMotion, x: np.ndarray, fps: float, config: ProjectionConfig,
+                on_step: Callable[[int, int], None] | None = None) -> dict[str, np.ndarray]:  # fmt: skip
+    """P of one motion under the search controller: no outside hand. Its failure is a fall, not a world
+    error (the body may drift from the reference's path), so imitation selection keeps the simulation of a
+    grounded motion that did not fall; ``mpjpe`` still reports the world error, drift included."""
+    ref = prepare_reference(prep.model, prep.target, config.humanoid.control_dt, config.tracking)
+    search = SearchController(prep.model, config.search, config.humanoid, config.tracking)
+    roll, record = search.run(ref, reset_on_fail=config.reset_on_fail, on_step=on_step)
+    out = _back_to_input_rate(roll, prep.model, prep.lift, x, fps, 1.0 / config.humanoid.control_dt, np.inf,
+                              config.reset_on_fail, prep.grounded)  # fmt: skip
+    return out | {"ilc_pass": np.array(0), "body": prep.body, "grounded": np.array(prep.grounded),
+                  "teacher_obs": record.observations, "teacher_offsets": record.offsets.astype(np.float32)}
 
 
 def _grounded(model, qpos: np.ndarray, rate: float, config: ProjectionConfig) -> bool:

@@ -1,0 +1,120 @@
+"""The searching controller: P with no outside hand, on captured motion from the shared mocap."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from physmotion.errors import ShapeError
+from physmotion.io.importer import import_clip, load_manifest
+from physmotion.physics.policy import NUM_ACTIONS, OBS_DIM
+from physmotion.physics.projection import ProjectionConfig, prepare_motion, project
+from physmotion.physics.search import EFFORTS, SearchConfig, SearchController, effort, no_hand
+from physmotion.physics.sim import simulate
+from physmotion.physics.tracking import ModelBasedTracker, prepare_reference
+
+RUN = "bandai2_dataset-2_run_normal_001"  # a captured run, 3.3 s: the tracker with its hand off falls in it
+
+
+@pytest.fixture(scope="module")
+def captured_run(mocap_dir: Path) -> np.ndarray:
+    """The run through the importer, P's input convention: joints (T, 22, 3) float64 at 20 fps."""
+    clips = {c.clip: c for c in load_manifest(mocap_dir)}
+    return import_clip(clips[RUN], floor="frame0").joints.astype(np.float64)
+
+
+@pytest.fixture(scope="module")
+def searched(captured_run: np.ndarray):
+    """The run projected by the search at the default effort, and its config."""
+    config = ProjectionConfig().with_controller("search", search=effort("default", seed=3))
+    return project(captured_run, 20.0, config), config
+
+
+def test_the_tracker_alone_falls_without_its_hand(captured_run: np.ndarray) -> None:
+    # What the search is for: the same tracker with its outside hand off does not carry this run.
+    config = ProjectionConfig()
+    prep = prepare_motion(captured_run, 20.0, config)
+    ref = prepare_reference(prep.model, prep.target, config.humanoid.control_dt, config.tracking)
+    tracker = ModelBasedTracker(prep.model, no_hand(config.tracking))
+    roll = simulate(prep.model, ref, tracker, config.humanoid, fail_mpjpe=0.5)
+    assert roll.failed_at is not None and roll.failed_at < len(ref.qpos) // 2
+
+
+def test_search_carries_the_run_with_no_outside_help(searched, captured_run: np.ndarray) -> None:
+    result, _ = searched
+    assert bool(result.success) and bool(result.selected) and int(result.resets) == 0
+    # No outside hand at all: the root residual is exactly zero and no joint passed its actuator's limit.
+    assert np.all(result.residual_force == 0.0) and np.all(result.residual_torque == 0.0)
+    assert not result.over_limit.any()
+    # The body performs the run: pelvis-relative body positions stay near the input's.
+    sim = result.simulated.astype(np.float64)
+    rel = np.linalg.norm((sim - sim[:, :1]) - (captured_run - captured_run[:, :1]), axis=-1).mean()
+    assert rel < 0.08, rel
+    # and it runs: the pelvis covers most of the input's horizontal distance.
+    travel_in = np.linalg.norm(captured_run[-1, 0, [0, 2]] - captured_run[0, 0, [0, 2]])
+    travel_out = np.linalg.norm(sim[-1, 0, [0, 2]] - sim[0, 0, [0, 2]])
+    assert travel_out > 0.8 * travel_in > 1.0
+
+
+def test_teacher_records_per_control_step(searched) -> None:
+    result, config = searched
+    steps = result.teacher_obs.shape[0]
+    assert result.teacher_obs.shape == (steps, OBS_DIM) and result.teacher_offsets.shape == (steps, NUM_ACTIONS)
+    assert steps == round((len(result.joints) - 1) / 20.0 * 30.0) + 1  # the control rate, 30 Hz
+    assert np.all(np.isfinite(result.teacher_obs))
+    # Offsets are what the search chose: non-zero, and within a few spreads of the widest retry.
+    widest = config.search.harder(config.search.retries).sigma
+    assert np.abs(result.teacher_offsets[:-1]).max() > 0.0
+    assert np.abs(result.teacher_offsets).max() < 6 * widest
+
+
+def test_search_is_deterministic_under_its_seed(captured_run: np.ndarray, searched) -> None:
+    result, config = searched
+    short = captured_run[:12]
+    a = project(short, 20.0, config)
+    b = project(short, 20.0, config)
+    assert np.array_equal(a.simulated, b.simulated) and np.array_equal(a.teacher_offsets, b.teacher_offsets)
+    other = project(short, 20.0, replace(config, search=replace(config.search, seed=4)))
+    assert not np.array_equal(a.teacher_offsets, other.teacher_offsets)
+    # A batch gives what its motions give one by one (worker processes, one rollout thread each).
+    batch = project(np.stack([short, short]), 20.0, config)
+    assert np.array_equal(batch.simulated[1], a.simulated)
+
+
+def test_a_fall_is_reset_under_generation_preset(captured_run: np.ndarray) -> None:
+    # A search too weak to carry the run (one candidate round, no lookahead to speak of) falls; generation's
+    # preset puts the humanoid back and counts it, and the plain preset keeps the input, flagged.
+    weak = SearchConfig(candidates=2, rounds=1, elites=1, horizon=1, sigma=1e-6, retries=0, rollback=0)
+    plain = project(captured_run, 20.0, ProjectionConfig().with_controller("search", search=weak))
+    assert not bool(plain.success) and not bool(plain.selected)
+    assert np.array_equal(plain.joints, captured_run.astype(np.float32))
+    sampling = ProjectionConfig.sampling().with_controller("search", search=weak)
+    reset = project(captured_run, 20.0, sampling)
+    assert int(reset.resets) >= 1 and bool(reset.selected)
+
+
+def test_search_config_is_checked() -> None:
+    assert set(EFFORTS) == {"fast", "default", "best"}
+    with pytest.raises(ShapeError, match="unknown search effort"):
+        effort("hardest")
+    with pytest.raises(ShapeError, match="candidates"):
+        SearchConfig(candidates=0)
+    with pytest.raises(ShapeError, match="elites"):
+        SearchConfig(candidates=4, elites=5)
+    harder = SearchConfig().harder(1)
+    assert harder.candidates == 64 and harder.horizon == 15 and harder.sigma == pytest.approx(0.2)
+
+
+def test_controller_records_its_rollouts(captured_run: np.ndarray) -> None:
+    config = ProjectionConfig()
+    prep = prepare_motion(captured_run[:12], 20.0, config)
+    ref = prepare_reference(prep.model, prep.target, config.humanoid.control_dt, config.tracking)
+    search = SearchController(prep.model, effort("default"), config.humanoid, config.tracking)
+    roll, record = search.run(ref)
+    windows = int(np.ceil((len(ref.qpos) - 1) / search.config.window))
+    assert record.rollouts >= windows * search.config.candidates * search.config.rounds
+    assert roll.qpos.shape == (len(ref.qpos), prep.model.nq) and roll.failed_at is None
+    assert np.all(record.effort[:-1] >= 0)
