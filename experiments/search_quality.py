@@ -68,13 +68,21 @@ def generated_set(seconds: float, seeds: int) -> list[tuple[str, np.ndarray]]:
 
 
 def rows(efforts: list[str], cost: SearchCost | None) -> dict[str, ProjectionConfig]:
-    """Row label -> P's config."""
+    """Row label -> P's config. The tracker with and without its hand, under MuJoCo's default pyramidal
+    friction cone and under the elliptic one at impratio 10 (what the search runs on); the search at the
+    default effort under the pyramidal cone, and at every effort in ``efforts`` under the elliptic one."""
     plain = preset("plain")
-    out = {"tracker, hand on": plain, "tracker, hand off": replace(plain, tracking=no_hand(plain.tracking))}
-    for name in efforts:
+    elliptic = replace(plain.humanoid, cone="elliptic", impratio=10.0)
+    pyramidal = replace(plain.humanoid, cone="pyramidal", impratio=1.0)
+    out = {}
+    for label, humanoid in (("pyramidal", pyramidal), ("elliptic", elliptic)):
+        out[f"tracker, hand on, {label}"] = replace(plain, humanoid=humanoid)
+        out[f"tracker, hand off, {label}"] = replace(plain, humanoid=humanoid, tracking=no_hand(plain.tracking))
+    searches = [("default", pyramidal, "pyramidal")] + [(name, elliptic, "elliptic") for name in efforts]
+    for name, humanoid, label in searches:
         search = effort(name)
         search = replace(search, cost=cost) if cost is not None else search
-        out[f"search {name}"] = plain.with_controller("search", search=search)
+        out[f"search {name}, {label}"] = replace(plain.with_controller("search", search=search), humanoid=humanoid)
     return out
 
 

@@ -161,6 +161,30 @@ def test_project_writes_the_simulated_motion(mocap_dir: Path, tmp_path: Path) ->
     assert res.returncode == 1 and res.stderr.startswith("error: ") and not (tmp_path / "x.npz").exists()
 
 
+def test_project_with_the_search_uses_no_outside_help(mocap_dir: Path, tmp_path: Path) -> None:
+    npz, out, teacher = tmp_path / "walk.npz", tmp_path / "searched.npz", tmp_path / "teacher.npz"
+    assert run("import", mocap_dir / BANDAI_WALK, "-o", npz).returncode == 0
+    short = Motion.load(npz)
+    short.joints, short.rotations = short.joints[:24], short.rotations[:24]
+    short.save(npz)
+    res = run("project", npz, "-o", out, "--controller", "search", "--effort", "fast", "--teacher", teacher)
+    assert res.returncode == 0, res.stderr
+    assert "simulation kept" in res.stdout and "no outside help" in res.stdout
+    searched = Motion.load(out)
+    assert searched.joints.shape == (24, 22, 3) and searched.licence_tag == short.licence_tag
+    assert searched.residual_cap == 0.0 and not np.any(searched.residual) and not searched.over_limit.any()
+    records = np.load(teacher)
+    steps = records["observations"].shape[0]
+    assert records["offsets"].shape == (steps, 63) and steps == 35  # 23 frames at 20 fps -> 1.15 s at 30 Hz
+    assert str(records["licence_tag"]) == short.licence_tag
+    # Bad requests: one line each, nothing written.
+    res = run("project", npz, "-o", tmp_path / "x.npz", "--controller", "search", "--effort", "hardest")
+    assert res.returncode == 1 and "unknown search effort" in res.stderr and res.stderr.count("\n") == 1
+    res = run("project", npz, "-o", tmp_path / "y.npz", "--teacher", tmp_path / "t.npz")
+    assert res.returncode == 1 and "--teacher needs --controller search" in res.stderr
+    assert not any((tmp_path / n).exists() for n in ("x.npz", "y.npz", "t.npz"))
+
+
 def _help_defaults(*command: str) -> dict[str, str]:
     """``--option -> default`` as the help of a command states them ("(default: X).")."""
     res = run(*command, "--help")

@@ -211,6 +211,11 @@ class HumanoidConfig:
     integrator: str = "implicitfast"  # Euler blows up: the actuators' kv is only implicit there
     solver: str = "Newton"
     iterations: int = 50
+    # Friction cone and the frictional-to-normal impedance ratio: MuJoCo's defaults (pyramidal, 1) let a
+    # loaded contact creep; elliptic with impratio 10 holds it (docs/decisions/projection.md: "a searching
+    # controller with no outside hand" has the figures of both).
+    cone: str = "pyramidal"
+    impratio: float = 1.0
     contact_excludes: tuple[tuple[str, str], ...] = DEFAULT_EXCLUDES
     heel_length: float = 0.061  # m behind the ankle (default body; scales with it); PHC's ankle box
     sole_below_toe: float = 0.0145  # m from the toe joint down to the sole (PHC's toe box)
@@ -439,7 +444,7 @@ def build_mjcf(offsets: np.ndarray | None = None, config: HumanoidConfig | None 
         '<mujoco model="physmotion_smpl22">',
         '  <compiler angle="radian" autolimits="true"/>',
         f'  <option timestep="{cfg.sim_dt:.10g}" integrator="{cfg.integrator}" solver="{cfg.solver}"'
-        f' iterations="{cfg.iterations}"/>',
+        f' iterations="{cfg.iterations}" cone="{cfg.cone}" impratio="{cfg.impratio:g}"/>',
         "  <default>",
         f'    <joint type="hinge" armature="{cfg.armature:g}" damping="0"'
         f' limited="{str(cfg.joint_limits).lower()}"/>',

@@ -98,8 +98,14 @@ class ProjectionConfig:
     def with_controller(self, controller: str, policy: str | None = None,
                         search: SearchConfig | None = None) -> ProjectionConfig:  # fmt: skip
         """This P driven by ``controller`` ("tracker", "policy" loaded from ``policy``, or "search" at the
-        effort ``search``, the default one if None)."""
-        return replace(self, controller=controller, policy=policy, search=search or self.search)
+        effort ``search``, the default one if None). The search's humanoid has the elliptic friction cone at
+        impratio 10, under which its contacts creep less (docs/decisions/projection.md: "a searching
+        controller with no outside hand"); the tracker's keeps MuJoCo's default, as its figures were
+        measured."""
+        humanoid = self.humanoid
+        if controller == "search":
+            humanoid = replace(humanoid, cone="elliptic", impratio=10.0)
+        return replace(self, controller=controller, policy=policy, search=search or self.search, humanoid=humanoid)
 
     def residual_bound(self) -> float:
         """The cap on the root residual's force (x body weight) of whoever drives the humanoid: the

@@ -63,12 +63,18 @@ class SearchConfig:
     rounds: int = 2
     elites: int = 6
     window: int = 3  # control steps committed per search (0.1 s at 30 Hz)
-    horizon: int = 12  # lookahead control steps after the window
-    sigma: float = 0.15  # rad: spread of the first round
+    horizon: int = 15  # lookahead control steps after the window (0.5 s: a kick's weight shift starts early)
+    sigma: float = 0.2  # rad: spread of the first round
     decay: float = 0.7  # per lookahead step, the candidate's offset is multiplied by this
     warm: float = 0.5  # the next window's mean: this times the committed offset
+    # Spread on the ankle and toe hinges as a multiple of ``sigma``: their offsets move the feet on the floor.
+    foot_sigma: float = 1.0
+    # Control steps over which a window's offset blends in from the last committed one (0: a step change).
+    blend: int = 0
     retries: int = 2  # a window whose best candidate falls is searched again this many times, harder
     rollback: int = 1  # then, windows before it searched again (SAMCON's rollback)
+    # m: a window whose best candidate's pelvis-relative body error averages more than this is retried
+    retry_error: float = 0.10
     fall_drop: float = 0.35  # m: pelvis this far under the reference's pelvis is a fall
     fall_tilt: float = 1.0  # rad: pelvis up axis this far from the reference's is a fall
     cost: SearchCost = field(default_factory=SearchCost)
@@ -86,7 +92,7 @@ class SearchConfig:
 
     def harder(self, attempt: int) -> SearchConfig:
         """The effort of retry ``attempt`` (1, 2, ...): candidates x (1 + attempt), lookahead + 3 attempt,
-        spread x (1 + attempt / 3): the prototype's "twice the effort" at attempt 1."""
+        spread x (1 + attempt / 3) (after the prototype's "twice the effort", which carried a kick)."""
         if attempt == 0:
             return self
         return replace(self, candidates=self.candidates * (1 + attempt), horizon=self.horizon + 3 * attempt,
@@ -95,9 +101,9 @@ class SearchConfig:
 
 # The presets of ``--effort``; their costs are measured in experiments/search_quality.py.
 EFFORTS: dict[str, SearchConfig] = {
-    "fast": SearchConfig(candidates=16, rounds=2, elites=4, horizon=10, retries=2, rollback=1),
+    "fast": SearchConfig(candidates=16, rounds=2, elites=4, horizon=10, sigma=0.15),
     "default": SearchConfig(),
-    "best": SearchConfig(candidates=64, rounds=2, elites=8, horizon=15, sigma=0.2, retries=2, rollback=2),
+    "best": SearchConfig(candidates=64, rounds=2, elites=8, horizon=18, sigma=0.25, rollback=2),
 }
 
 
@@ -156,6 +162,10 @@ class SearchController:
         self._datas = [mujoco.MjData(model) for _ in range(threads)]
         self._fk = mujoco.MjData(model)
         self._foot_bodies = self.layout.body_ids[list(FOOT_JOINTS)]
+        # Per actuator (hinge qpos address 7 + i), the spread's multiple: foot_sigma on ankle and toe hinges.
+        self._spread = np.ones(model.nu)
+        for j in FOOT_JOINTS:
+            self._spread[self.layout.hinge_qpos[j] - 7] = self.config.foot_sigma
 
     # --- one episode -----------------------------------------------------------------------------------
     def run(self, ref: Reference, reset_on_fail: bool = False,
@@ -183,26 +193,36 @@ class SearchController:
         failed_at, resets = None, 0
         record = SearchRecord(offsets, level, costs)
         mean = np.zeros(model.nu)
+        last = np.zeros(model.nu)  # the offset committed last, which a window blends from
         k = 0
         rolled_back = 0  # windows re-searched since the last progress past the furthest window
         furthest = 0  # the furthest window start reached; windows before it, re-searched, start hardest
         while k < n - 1:
             w = min(cfg.window, n - 1 - k)
-            best = None
+            best, best_attempt = None, 0
             first = cfg.retries if k < furthest else 0
             for attempt in range(first, cfg.retries + 1):
-                best = self._search(states[k], nominal, goal, k, w, mean, cfg.harder(attempt), rng, record)
-                level[k : k + w] = attempt
-                if best.fell_at is None or best.fell_at >= w + cfg.harder(attempt).horizon // 2:
-                    break  # a fall late in a long lookahead is the next windows' business
+                harder = cfg.harder(attempt)
+                found = self._search(states[k], nominal, goal, k, w, mean, last, harder, rng, record)
+                # A fall late in a long lookahead is the next windows' business; a window that keeps its
+                # feet but leaves the motion (a kick given up for balance) is retried as a fall is.
+                found.failed = (found.fell_at is not None and found.fell_at < w + harder.horizon // 2) or \
+                    float(found.body_error[:w].mean()) > cfg.retry_error
+                if best is None or found.rank(w) < best.rank(w):
+                    best, best_attempt = found, attempt
+                if not found.failed:
+                    break
+            level[k : k + w] = best_attempt
             if best.fell_at is not None and best.fell_at < w and rolled_back < cfg.rollback and k > 0:
                 # Roll back: search the window before again, hardest, from its own start.
                 back = max(0, k - cfg.window)
                 rolled_back += 1
                 mean = offsets[back].copy()
+                last = offsets[back - 1].copy() if back > 0 else np.zeros(model.nu)
                 k = back
                 continue
-            offsets[k : k + w] = best.offset
+            offsets[k : k + w] = best.applied[:w]
+            last = best.applied[w - 1].copy()
             costs[k + 1 : k + w + 1] = best.step_cost[:w]
             states[k + 1 : k + w + 1] = best.states[:w]
             mean = cfg.warm * best.offset
@@ -216,7 +236,7 @@ class SearchController:
                 resets += 1
                 reset_state(model, data, ref, at)
                 states[at] = self._get(data)
-                mean = np.zeros(model.nu)
+                mean, last = np.zeros(model.nu), np.zeros(model.nu)
                 level[at] = -1
                 k = at
                 continue
@@ -229,15 +249,17 @@ class SearchController:
         return roll, record
 
     # --- the search of one window ------------------------------------------------------------------------
-    def _search(self, state, nominal, goal, k, w, mean, cfg: SearchConfig, rng, record) -> _Candidate:
+    def _search(self, state, nominal, goal, k, w, mean, last, cfg: SearchConfig, rng, record) -> _Candidate:
         from mujoco import rollout
 
         n = len(nominal)
         h = min(cfg.horizon, n - 1 - k - w)
         steps = w + h
         scale = np.concatenate([np.ones(w), cfg.decay ** np.arange(1, h + 1)])  # (steps,)
+        # Weight of the candidate against the last committed offset per step: 1 once blended in.
+        blend = np.minimum(1.0, np.arange(1, steps + 1) / max(cfg.blend, 1))[:, None]  # (steps, 1)
         base = nominal[k : k + steps]  # nominal[j]: the tracker's targets over control step j -> j+1
-        mu, sigma = mean.copy(), np.full(len(mean), cfg.sigma)
+        mu, sigma = mean.copy(), cfg.sigma * self._spread
         best = None
         for _ in range(cfg.rounds):
             cand = mu + sigma * rng.standard_normal((cfg.candidates, len(mu)))
@@ -246,27 +268,28 @@ class SearchController:
                 cand[1] = 0.0  # the bare tracker
             else:
                 cand[1] = best.offset  # keep the best so far
-            ctrl = base[None] + cand[:, None, :] * scale[None, :, None]  # (C, steps, nu)
-            ctrl = np.repeat(ctrl, self.substeps, axis=1)
+            applied = (blend * cand[:, None, :] + (1 - blend) * last) * scale[None, :, None]  # (C, steps, nu)
+            ctrl = np.repeat(base[None] + applied, self.substeps, axis=1)
             init = np.repeat(state[None], cfg.candidates, axis=0)
             out, _ = rollout.rollout(self.model, self._datas, init, ctrl)
             record.rollouts += cfg.candidates
             record.sim_steps += cfg.candidates * steps * self.substeps
             at_ctrl = out[:, self.substeps - 1 :: self.substeps]  # (C, steps, nstate): after each control step
-            step_cost, fell = self._cost(at_ctrl, goal, k)
+            step_cost, fell, body_error = self._cost(at_ctrl, goal, k)
             total = step_cost.sum(axis=1)
             order = np.argsort(total, kind="stable")
             i = int(order[0])
             if best is None or total[i] < best.total:
                 fell_at = int(np.argmax(fell[i])) if fell[i].any() else None
-                best = _Candidate(cand[i].copy(), float(total[i]), step_cost[i], at_ctrl[i], fell_at)
+                best = _Candidate(cand[i].copy(), applied[i], float(total[i]), step_cost[i], at_ctrl[i], fell_at,
+                                  body_error[i])  # fmt: skip
             elite = cand[order[: cfg.elites]]
-            mu, sigma = elite.mean(axis=0), np.maximum(elite.std(axis=0), 0.1 * cfg.sigma)
+            mu, sigma = elite.mean(axis=0), np.maximum(elite.std(axis=0), 0.1 * cfg.sigma * self._spread)
         return best
 
-    def _cost(self, states: np.ndarray, goal: _Goal, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """Per-step cost (C, S) and fall flags (C, S) of candidate states (C, S, nstate) after control steps
-        k+1..k+S."""
+    def _cost(self, states: np.ndarray, goal: _Goal, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per-step cost (C, S), fall flags (C, S) and mean pelvis-relative body error (C, S), metres, of
+        candidate states (C, S, nstate) after control steps k+1..k+S."""
         c = self.config.cost
         cands, steps = states.shape[:2]
         qpos = states[..., self._qpos_at : self._qpos_at + self.model.nq]
@@ -292,7 +315,7 @@ class SearchController:
             cost += c.slip * np.sum(np.where(low, speed2, 0.0), axis=-1)
         fell = goal.fallen_many(qpos[..., 2], up, idx)
         fell = np.cumsum(fell, axis=1) > 0  # every step from the first fall on
-        return cost + c.fall * fell, fell
+        return cost + c.fall * fell, fell, np.mean(np.linalg.norm(rel, axis=-1), axis=-1)
 
     @property
     def layout_feet(self) -> list[int]:
@@ -349,11 +372,19 @@ class SearchController:
 
 @dataclass
 class _Candidate:
-    offset: np.ndarray  # (nu,)
+    offset: np.ndarray  # (nu,) the candidate drawn
+    applied: np.ndarray  # (S, nu) the offset applied per control step (blended in, decaying in the lookahead)
     total: float
     step_cost: np.ndarray  # (S,)
     states: np.ndarray  # (S, nstate) after each control step
     fell_at: int | None  # index into the S steps of the first fallen one
+    body_error: np.ndarray  # (S,) mean pelvis-relative body error, m
+    failed: bool = False  # the window counts as failed (a fall in it or soon after, or off the motion)
+
+    def rank(self, w: int) -> tuple[bool, float]:
+        """Order between attempts at one window (lookaheads differ, so costs do not compare): one that does
+        not fall within the window first, then the smaller body error over the window."""
+        return (self.fell_at is not None and self.fell_at < w, float(self.body_error[:w].mean()))
 
 
 class _Goal:

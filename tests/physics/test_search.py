@@ -105,7 +105,7 @@ def test_search_config_is_checked() -> None:
     with pytest.raises(ShapeError, match="elites"):
         SearchConfig(candidates=4, elites=5)
     harder = SearchConfig().harder(1)
-    assert harder.candidates == 64 and harder.horizon == 15 and harder.sigma == pytest.approx(0.2)
+    assert harder.candidates == 64 and harder.horizon == 18 and harder.sigma == pytest.approx(0.2 * 4 / 3)
 
 
 def test_controller_records_its_rollouts(captured_run: np.ndarray) -> None:
