@@ -245,8 +245,10 @@ def _opt_str(path: Path | None) -> str | None:
 
 @app.command("project")
 def project_motion(
-    path: Path = typer.Argument(..., help="A motion .npz (joints at any fps)."),
-    out: Path = typer.Option(..., "-o", "--out", help="Output .npz with the projected motion."),
+    paths: list[Path] = typer.Argument(..., help="Motion .npz files (joints at any fps)."),
+    out: Path = typer.Option(..., "-o", "--out", help="Output .npz with the projected motion; with several "
+                             "inputs, a folder that receives <stem>.npz per input (those already there are "
+                             "skipped, so an interrupted run resumes)."),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
     ilc: int = typer.Option(0, "--ilc", help="Iterative learning control: simulate this many more times, "
                             "each time with the root's error of the last fed forward into the reference, and "
@@ -259,9 +261,14 @@ def project_motion(
     policy: Path | None = typer.Option(None, help=POLICY_HELP),
     effort: str = typer.Option("default", help=EFFORT_HELP),
     seed: int = typer.Option(0, help="With --controller search: the seed of its random candidates."),
-    teacher: Path | None = typer.Option(None, help="With --controller search: also write the search's teacher "
-                                        "records (.npz: per control step, the observation a policy sees and the "
-                                        "joint-target offsets chosen) to this file."),
+    teacher: bool = typer.Option(False, "--teacher", help="With --controller search: also write the search's "
+                                 "teacher records beside each output, <stem>.teacher.npz (per control step, the "
+                                 "observation a policy sees and the joint-target offsets chosen)."),
+    workers: int = typer.Option(0, help="With several inputs: local worker processes, one motion each "
+                                "(0: one per core)."),
+    ray: str | None = typer.Option(None, help="With several inputs: run one Ray task per motion instead of "
+                                   "local processes, on the Ray cluster at this address, or 'local' to start "
+                                   "one on this machine (needs pip install 'physmotion[ray]'; docs/cluster.md)."),
     preset_name: str = typer.Option("plain", "--preset", help="P's preset by name (physmotion/physics/presets.py; "
                                     "docs/cli.md lists them): 'plain' keeps the input where the imitation fails, "
                                     "'sampling' is generation's P; --ilc and --fine-step apply on top."),
@@ -269,42 +276,48 @@ def project_motion(
     """Physics projection (PhysDiff's P): imitate the motion with the simulated humanoid."""
     from dataclasses import replace
 
-    from physmotion.metrics.report import residual_line
-    from physmotion.motion import Motion
+    from physmotion.physics.files import project_file, project_files, teacher_path
     from physmotion.physics.presets import preset
-    from physmotion.physics.projection import project
-
     from physmotion.physics.search import effort as search_effort
 
-    if teacher is not None and controller != "search":
+    if teacher and controller != "search":
         raise PhysmotionError("--teacher needs --controller search: only the search makes teacher records")
     search = search_effort(effort, seed) if controller == "search" else None
     config = preset(preset_name).with_controller(controller, _opt_str(policy), search)
     config = replace(config, ilc_passes=ilc) if ilc else config
     config = config.at_fine_step() if fine_step else config
-    _check_out(out, overwrite)
-    if teacher is not None:
-        _check_out(teacher, overwrite)
-    motion = Motion.load(path)
-    with _step_bar(f"projecting {path.name} ({controller}), control steps") as tick:
-        result = project(motion.joints, motion.fps, config, on_step=tick)
-    # The input kept is not the humanoid's motion: it carries none of the simulation's records.
-    sim = dict(humanoid=result.body, resets=int(result.resets), residual=result.residual,
-               residual_cap=config.residual_bound(), over_limit=result.over_limit)
-    sim = sim if result.selected else dict.fromkeys(sim)
-    replace(motion, joints=result.joints, rotations=None, offsets=None, **sim).save(out)
-    if teacher is not None:
-        from physmotion.physics.search import save_teacher
+    if len(paths) == 1 and ray is None:
+        _check_out(out, overwrite)
+        if teacher:
+            _check_out(teacher_path(out), overwrite)
+        with _step_bar(f"projecting {paths[0].name} ({controller}), control steps") as tick:
+            result = project_file(paths[0], out, config, teacher, on_step=tick)
+        console.print(f"wrote {out} ({controller}): {result.summary}", highlight=False)
+        return
+    missing = [p for p in paths if not p.is_file()]
+    if missing:
+        raise PhysmotionError(f"{missing[0]}: no such file")
+    if out.exists() and not out.is_dir():
+        raise PhysmotionError(f"{out} is a file: with several inputs, -o names a folder")
+    if overwrite:  # re-project everything: the outputs of an earlier run are not skipped
+        from physmotion.physics.files import outputs_for
 
-        save_teacher(teacher, result, motion)
-    kept = "simulation kept" if result.selected else "tracking failed: input kept (flagged)"
-    if config.ilc_passes:
-        kept += f" (pass {int(result.ilc_pass)} of {config.ilc_passes + 1})"
-    if config.reset_on_fail:  # a preset that puts the fallen humanoid back on the motion (a jump in the output)
-        kept += f", the humanoid put back onto the motion {int(result.resets)} time(s)"
-    helped = residual_line(result.residual, config.residual_bound(), result.over_limit)
-    console.print(f"wrote {out} ({controller}): {kept}; MPJPE mean {1000 * result.mpjpe.mean():.0f} mm, "
-                  f"{helped} (W: body weight)", highlight=False)  # fmt: skip
+        for o in outputs_for(paths, out):
+            for f in (o, teacher_path(o)):
+                f.unlink(missing_ok=True)
+    with _step_bar(f"projecting {len(paths)} motions ({controller})") as tick:
+        done = []
+
+        def report(r) -> None:
+            done.append(r)
+            tick(len(done), len(paths))
+            console.print(f"{r.source.name} -> {r.out}: {r.summary}", highlight=False)
+
+        results = project_files(paths, out, config, teacher, workers=workers, ray=ray, on_done=report)
+    kept = sum(r.selected for r in results if not r.skipped)
+    skipped = sum(r.skipped for r in results)
+    console.print(f"wrote {len(results) - skipped} motions to {out} ({controller}): {kept} simulations kept"
+                  + (f"; {skipped} already there, skipped" if skipped else ""), highlight=False)
 
 
 @app.command("metrics")

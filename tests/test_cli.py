@@ -162,12 +162,12 @@ def test_project_writes_the_simulated_motion(mocap_dir: Path, tmp_path: Path) ->
 
 
 def test_project_with_the_search_uses_no_outside_help(mocap_dir: Path, tmp_path: Path) -> None:
-    npz, out, teacher = tmp_path / "walk.npz", tmp_path / "searched.npz", tmp_path / "teacher.npz"
+    npz, out, teacher = tmp_path / "walk.npz", tmp_path / "searched.npz", tmp_path / "searched.teacher.npz"
     assert run("import", mocap_dir / BANDAI_WALK, "-o", npz).returncode == 0
     short = Motion.load(npz)
     short.joints, short.rotations = short.joints[:24], short.rotations[:24]
     short.save(npz)
-    res = run("project", npz, "-o", out, "--controller", "search", "--effort", "fast", "--teacher", teacher)
+    res = run("project", npz, "-o", out, "--controller", "search", "--effort", "fast", "--teacher")
     assert res.returncode == 0, res.stderr
     assert "simulation kept" in res.stdout and "no outside help" in res.stdout
     searched = Motion.load(out)
@@ -180,9 +180,9 @@ def test_project_with_the_search_uses_no_outside_help(mocap_dir: Path, tmp_path:
     # Bad requests: one line each, nothing written.
     res = run("project", npz, "-o", tmp_path / "x.npz", "--controller", "search", "--effort", "hardest")
     assert res.returncode == 1 and "unknown search effort" in res.stderr and res.stderr.count("\n") == 1
-    res = run("project", npz, "-o", tmp_path / "y.npz", "--teacher", tmp_path / "t.npz")
+    res = run("project", npz, "-o", tmp_path / "y.npz", "--teacher")
     assert res.returncode == 1 and "--teacher needs --controller search" in res.stderr
-    assert not any((tmp_path / n).exists() for n in ("x.npz", "y.npz", "t.npz"))
+    assert not any((tmp_path / n).exists() for n in ("x.npz", "y.npz", "y.teacher.npz"))
 
 
 def _help_defaults(*command: str) -> dict[str, str]:

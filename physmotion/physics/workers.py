@@ -18,8 +18,8 @@ import multiprocessing
 import os
 import sys
 import threading
-from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from typing import TypeVar
 
@@ -53,6 +53,25 @@ def map_in_workers(fn: Callable[[T], R], items: Sequence[T], workers: int = 0) -
     except BrokenProcessPool:
         _shutdown()
         raise PhysmotionError("a worker process died (out of memory, or killed); nothing returned") from None
+
+
+def imap_in_workers(fn: Callable[[T], R], items: Sequence[T], workers: int = 0) -> Iterator[tuple[int, R]]:
+    """``(index, fn(item))`` for every item, in the order they finish, in worker processes when there is more
+    than one item and core (:func:`map_in_workers`' rules). An exception raised by ``fn`` is raised here
+    once the item's turn comes; items finished before it have been yielded."""
+    n = worker_count(workers, len(items))
+    if n == 1 or multiprocessing.current_process().daemon:
+        for i, x in enumerate(items):
+            yield i, fn(x)
+        return
+    try:
+        pool = _get_pool(n)
+        futures = {pool.submit(fn, x): i for i, x in enumerate(items)}
+        for future in as_completed(futures):
+            yield futures[future], future.result()
+    except BrokenProcessPool:
+        _shutdown()
+        raise PhysmotionError("a worker process died (out of memory, or killed); what finished is written") from None
 
 
 def _get_pool(size: int) -> ProcessPoolExecutor:

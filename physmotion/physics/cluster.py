@@ -1,0 +1,54 @@
+"""Ray beyond one machine: P's motions as Ray tasks, one CPU each (docs/cluster.md says how to run a cluster).
+
+Ray is an optional extra (``pip install physmotion[ray]``); without it, local worker processes do the same
+work (:func:`physmotion.physics.workers.imap_in_workers`). A task returns what it wrote; a task whose worker
+dies loses its motion only, and the caller's re-run skips what is written.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Sequence
+from typing import TypeVar
+
+from physmotion.errors import PhysmotionError
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+
+def map_on_ray(fn: Callable[[T], R], items: Sequence[T], address: str = "local") -> Iterator[tuple[int, R]]:
+    """``(index, fn(item))`` for every item, in the order they finish, as Ray tasks of one CPU each.
+
+    address: "local" starts a Ray on this machine (every core) for the call and stops it after; any other
+    value is a running cluster's address ("auto", "ray://host:10001", "host:6379"), joined and left as it
+    was. ``fn`` and the items must pickle (cloudpickle: a module-level function or a partial of one)."""
+    try:
+        import ray
+    except ImportError:
+        raise PhysmotionError("--ray needs Ray: pip install 'physmotion[ray]' (or use --workers N)") from None
+    started = not ray.is_initialized()
+    if started:
+        try:
+            ray.init(address=None if address == "local" else address, include_dashboard=False,
+                     log_to_driver=False, logging_level="WARNING")  # fmt: skip
+        except (ConnectionError, RuntimeError, ValueError) as e:
+            raise PhysmotionError(f"cannot reach a Ray cluster at {address!r}: {e}") from None
+    try:
+        task = ray.remote(num_cpus=1, max_retries=1)(_call)  # a partial is no function to Ray: wrap it
+        pending = {task.remote(fn, x): i for i, x in enumerate(items)}
+        while pending:
+            done, _ = ray.wait(list(pending), num_returns=1)
+            ref = done[0]
+            index = pending.pop(ref)
+            try:
+                value = ray.get(ref)
+            except ray.exceptions.RayTaskError as e:  # the task's own exception, as a local run raises it
+                raise e.as_instanceof_cause() from None
+            yield index, value
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def _call(fn: Callable[[T], R], item: T) -> R:
+    return fn(item)
