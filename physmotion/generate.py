@@ -31,7 +31,7 @@ from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.physdiff import projection_settings
 from physmotion.diffusion.samplers import SamplerConfig
 from physmotion.errors import PhysmotionError
-from physmotion.metrics.report import pooled_help, residual_line
+from physmotion.metrics.report import help_words, pooled_help
 from physmotion.motion import write_atomic
 from physmotion.paths import DEFAULT_MODEL
 from physmotion.physics.projection import ProjectionConfig
@@ -255,7 +255,7 @@ def physics_summary(result: GenerateResult) -> str:
     if not log.tracked:
         return ""
     pooled = pooled_help(result.motions)
-    helped = f"; {residual_line(*pooled)} (W: body weight)" if pooled else ""
+    helped = f"; {help_words(*pooled)}" if pooled else ""
     if result.imitation_failed:  # morph: a failed imitation keeps the sampled motion, nothing is reset
         n, failed = len(result.imitation_failed), int(sum(result.imitation_failed))
         return (f"the simulated humanoid imitated {n - failed} of {n} motions; "

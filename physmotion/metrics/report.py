@@ -145,13 +145,22 @@ def residual_stats(residual: np.ndarray, bound: float | None = None) -> dict[str
     return out
 
 
+NO_HELP = "no outside help (root residual 0; no joint torque over its actuator's limit)"
+
+
+def help_words(residual: np.ndarray, bound: float | None = None, over_limit: np.ndarray | None = None) -> str:
+    """:func:`residual_line` with the unit it uses spelt out where it uses one."""
+    line = residual_line(residual, bound, over_limit)
+    return line if line == NO_HELP else f"{line} (W: body weight)"
+
+
 def residual_line(residual: np.ndarray, bound: float | None = None, over_limit: np.ndarray | None = None) -> str:
     """One plain line for a CLI summary: the root residual's mean and p95, force and torque; with ``bound``
     (the force's cap, x W) the share of frames at it; with ``over_limit`` (frames,) bool the share of frames
     with a joint's torque over its actuator's limit. A P with no outside hand (``bound`` 0, as the search
     controller's) that used none says so in words."""
     if bound == 0.0 and not np.any(residual) and (over_limit is None or not np.any(over_limit)):
-        return "no outside help (root residual 0; no joint torque over its actuator's limit)"
+        return NO_HELP
     s = residual_stats(residual, bound)
     cap = "" if bound is None else f", at its {bound:.2f} W cap in {100 * s['residual_at_cap']:.1f} % of frames"
     over = "" if over_limit is None else \

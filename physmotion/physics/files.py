@@ -44,7 +44,7 @@ def project_file(source: str | Path, out: str | Path, config: ProjectionConfig, 
     """Project the motion in ``source`` (.npz) and write the result to ``out`` (and, with ``teacher`` under
     the search, its teacher records beside it), atomically. The input kept by imitation selection carries
     none of the simulation's records."""
-    from physmotion.metrics.report import residual_line
+    from physmotion.metrics.report import help_words
     from physmotion.motion import Motion
 
     source, out = Path(source), Path(out)
@@ -66,8 +66,8 @@ def project_file(source: str | Path, out: str | Path, config: ProjectionConfig, 
     if config.reset_on_fail:  # a preset that puts the fallen humanoid back on the motion (a jump in the output)
         kept += f", the humanoid put back onto the motion {int(result.resets)} time(s)"
     mpjpe = 1000 * float(result.mpjpe.mean())
-    helped = residual_line(result.residual, config.residual_bound(), result.over_limit)
-    summary = f"{kept}; MPJPE mean {mpjpe:.0f} mm, {helped} (W: body weight)"
+    helped = help_words(result.residual, config.residual_bound(), result.over_limit)
+    summary = f"{kept}; MPJPE mean {mpjpe:.0f} mm, {helped}"
     return FileResult(source, out, bool(result.selected), int(result.resets), mpjpe, summary)
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from physmotion.metrics.report import help_stats, residual_line, residual_stats, residual_summary
+from physmotion.metrics.report import NO_HELP, help_stats, help_words, residual_line, residual_stats, residual_summary
 from physmotion.motion import Motion
 
 
@@ -28,6 +28,19 @@ def test_share_of_frames_at_the_cap() -> None:
     assert residual_stats(residual, bound=0.2)["residual_at_cap"] == pytest.approx(0.6)
     assert residual_stats(residual, bound=0.3)["residual_at_cap"] == 0.0
     assert "at its 0.20 W cap in 60.0 % of frames" in residual_line(residual, bound=0.2)
+
+
+def test_no_outside_help_is_said_in_words() -> None:
+    # A P with no hand (cap 0, the search's) that applied none says so; any residual, or a joint over its
+    # limit, and the figures come back.
+    zero = np.zeros((5, 2))
+    assert residual_line(zero, 0.0, np.zeros(5, bool)) == NO_HELP == help_words(zero, 0.0)
+    assert residual_line(zero, 0.0, np.array([False, True, False, False, False])) != NO_HELP
+    some = zero.copy()
+    some[2, 0] = 0.01
+    assert "force mean 0.002 W" in residual_line(some, 0.0)
+    assert help_words(some, 0.0).endswith("(W: body weight)")
+    assert residual_line(zero, 0.2) != NO_HELP  # a tracker that happened to need no help still had a hand
 
 
 def test_residual_summary_of_a_motion() -> None:
