@@ -47,14 +47,17 @@ FAST_PROMPTS = {  # kind -> prompt: generic wording of each kind of fast motion
 FLIGHT_KINDS = ("jump", "hop")
 
 
-def captured_set(mocap: str, hdm05: str, per: int) -> list[tuple[str, ClipInfo]]:
-    """(category, clip): the first ``per`` clips of each mocap category and of each HDM05 class."""
+def captured_set(mocap: str, hdm05: str, per: int, only: str = "") -> list[tuple[str, ClipInfo]]:
+    """(category, clip): the first ``per`` clips of each mocap category and of each HDM05 class (only those
+    categories whose name contains one of the comma-separated words of ``only``, where given)."""
     picked: dict[str, list[ClipInfo]] = {}
     for info in load_manifest(mocap):
         picked.setdefault(category(info.captions), []).append(info)
     for info in load_manifest(hdm05):
         picked.setdefault("hdm05 " + info.path.parent.name, []).append(info)
-    return [(cat, info) for cat, infos in picked.items() for info in infos[:per]]
+    words = [w for w in only.split(",") if w]
+    keep = [cat for cat in picked if not words or any(w in cat for w in words)]
+    return [(cat, info) for cat in keep for info in picked[cat][:per]]
 
 
 def generated_set(seconds: float, seeds: int) -> list[tuple[str, np.ndarray]]:
@@ -147,6 +150,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seeds", type=int, default=2)
     parser.add_argument("--seconds", type=float, default=4.0)
     parser.add_argument("--max-seconds", type=float, default=6.0)
+    parser.add_argument("--categories", default="", help="only captured categories containing these words")
     parser.add_argument("--cost", default="", help="JSON of SearchCost fields to override")
     parser.add_argument("--out", default="results/search_quality", help="writes OUT.md and OUT.json")
     args = parser.parse_args(argv)
@@ -156,7 +160,7 @@ def main(argv: list[str] | None = None) -> None:
         effort(e)  # a bad name fails here, before any work
     cost = SearchCost(**json.loads(args.cost)) if args.cost else None
     motions: list[tuple[str, str, np.ndarray]] = []  # (set, kind, joints at FPS)
-    for cat, info in captured_set(args.mocap, args.hdm05, args.captured_per):
+    for cat, info in captured_set(args.mocap, args.hdm05, args.captured_per, args.categories):
         joints = import_clip(info, floor="frame0").joints.astype(np.float64)
         motions.append(("captured", cat, joints[: int(args.max_seconds * FPS) + 1]))
     if args.seeds:
