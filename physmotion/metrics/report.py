@@ -136,12 +136,13 @@ def pooled_help(motions: Sequence) -> tuple[np.ndarray, float | None, np.ndarray
 def residual_stats(residual: np.ndarray, bound: float | None = None) -> dict[str, float]:
     """Mean and 95th percentile of a root residual (..., 2): force (x W) and torque (x W x 1 m), over frames.
     With ``bound``, the force's cap (x W), also ``residual_at_cap``: the share of frames whose force is
-    within 1 % of it (the body held by the most outside help P allows, every residual update of the frame)."""
+    within 1 % of it (the body held by the most outside help P allows, every residual update of the frame);
+    0 for a P with no hand (``bound`` 0), which has no help to be held by."""
     r = np.asarray(residual, dtype=np.float64).reshape(-1, 2)
     out = {"residual_force": float(r[:, 0].mean()), "residual_force_p95": float(np.percentile(r[:, 0], 95)),
            "residual_torque": float(r[:, 1].mean()), "residual_torque_p95": float(np.percentile(r[:, 1], 95))}
     if bound is not None:
-        out["residual_at_cap"] = float(np.mean(r[:, 0] >= AT_CAP * bound))
+        out["residual_at_cap"] = float(np.mean(r[:, 0] >= AT_CAP * bound)) if bound > 0 else 0.0
     return out
 
 

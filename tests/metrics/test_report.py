@@ -41,6 +41,7 @@ def test_no_outside_help_is_said_in_words() -> None:
     assert "force mean 0.002 W" in residual_line(some, 0.0)
     assert help_words(some, 0.0).endswith("(W: body weight)")
     assert residual_line(zero, 0.2) != NO_HELP  # a tracker that happened to need no help still had a hand
+    assert residual_stats(zero, 0.0)["residual_at_cap"] == 0.0  # no hand: nothing to be held at
 
 
 def test_residual_summary_of_a_motion() -> None:
