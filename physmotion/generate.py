@@ -64,7 +64,7 @@ class GenerateConfig:
                        morph_projection=self.morph_projection.at_fine_step())  # fmt: skip
 
     def with_controller(self, controller: str, policy: str | None = None) -> GenerateConfig:
-        """This run with every P driven by ``controller`` ("tracker" or "policy"; ``generate --controller``)."""
+        """This run with every P driven by ``controller`` ("tracker", "policy" or "search"; ``generate --controller``)."""
         return replace(self, projection=self.projection.with_controller(controller, policy),
                        morph_projection=self.morph_projection.with_controller(controller, policy))  # fmt: skip
 

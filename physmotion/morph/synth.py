@@ -68,7 +68,7 @@ class SynthConfig:
     split: str = "train"
     max_frames: int | None = None  # clip the drawn lengths further (quick runs); None: the model's
     ilc_passes: int = 0  # P with iterative learning control (ProjectionConfig.ilc_passes); 0: plain P
-    controller: str = "tracker"  # P's controller (ProjectionConfig.controller): "tracker" or "policy"
+    controller: str = "tracker"  # P's controller (ProjectionConfig.controller): "tracker", "policy" or "search"
     policy: str | None = None  # the policy folder for "policy"; None: the shipped one
 
     def __post_init__(self) -> None:

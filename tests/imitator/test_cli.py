@@ -27,5 +27,5 @@ def test_project_with_the_policy_reports_the_residual(small_built_dir: Path, tmp
     out = Motion.load(tmp_path / "sim.npz")
     assert out.residual is not None and float(out.residual[:, 0].max()) <= 0.05 + 1e-6  # the policy's cap
     res = invoke("project", tmp_path / "walk.npz", "-o", tmp_path / "x.npz", "--controller", "pid")
-    assert res.returncode == 1 and "controller must be 'tracker' or 'policy'" in res.stderr
+    assert res.returncode == 1 and "controller must be one of tracker, policy, search" in res.stderr
     assert not (tmp_path / "x.npz").exists()
