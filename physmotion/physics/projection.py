@@ -94,6 +94,8 @@ class ProjectionConfig:
             raise ShapeError(f"controller must be one of {', '.join(CONTROLLERS)}, got {self.controller!r}")
         if self.ilc_passes and self.reset_on_fail:  # a reset or a moved reference is no error to learn from
             raise ShapeError("ilc_passes needs the plain projection (reset_on_fail off)")
+        if self.ilc_passes and self.controller == "search":  # the search corrects the body itself, per window
+            raise ShapeError("ilc_passes is for the tracker and the policy, not the search controller")
 
     def with_controller(self, controller: str, policy: str | None = None,
                         search: SearchConfig | None = None) -> ProjectionConfig:  # fmt: skip

@@ -104,6 +104,8 @@ def test_search_config_is_checked() -> None:
         SearchConfig(candidates=0)
     with pytest.raises(ShapeError, match="elites"):
         SearchConfig(candidates=4, elites=5)
+    with pytest.raises(ShapeError, match="not the search"):
+        replace(ProjectionConfig().with_controller("search"), ilc_passes=2)
     harder = SearchConfig().harder(1)
     assert harder.candidates == 64 and harder.horizon == 18 and harder.sigma == pytest.approx(0.2 * 4 / 3)
 
