@@ -81,7 +81,8 @@ def rows(efforts: list[str], cost: SearchCost | None) -> dict[str, ProjectionCon
     for label, humanoid in (("pyramidal", pyramidal), ("elliptic", elliptic)):
         out[f"tracker, hand on, {label}"] = replace(plain, humanoid=humanoid)
         out[f"tracker, hand off, {label}"] = replace(plain, humanoid=humanoid, tracking=no_hand(plain.tracking))
-    searches = [("default", pyramidal, "pyramidal")] + [(name, elliptic, "elliptic") for name in efforts]
+    searches = [(name, elliptic, "elliptic") for name in efforts]
+    searches.insert(min(2, len(searches)), ("default", pyramidal, "pyramidal"))  # before the slowest
     for name, humanoid, label in searches:
         search = effort(name)
         search = replace(search, cost=cost) if cost is not None else search
@@ -167,25 +168,32 @@ def main(argv: list[str] | None = None) -> None:
         motions += [("generated", kind, j) for kind, j in generated_set(args.seconds, args.seeds)]
     print(f"{len(motions)} motions", flush=True)
     configs = rows(efforts, cost)
+    meta = run_meta(__file__, argv, "plain", efforts=efforts, cost=args.cost or "default")
     per: dict[str, dict[str, list[dict]]] = {}
-    for label, config in configs.items():
+    seconds: dict[str, float] = {}
+    for label, config in configs.items():  # the table is written after every row: a long run keeps what it has
         start = time.perf_counter()
         for group, kind, joints in motions:
             per.setdefault(group, {}).setdefault(label, []).append(measure(kind, joints, FPS, config))
-        print(f"{label}: {time.perf_counter() - start:.0f} s", flush=True)
+        seconds[label] = time.perf_counter() - start
+        print(f"{label}: {seconds[label]:.0f} s", flush=True)
+        md = _markdown(per, args, efforts, len(configs) - len(seconds))
+        write_results(args.out, md, {"meta": meta | {"seconds": seconds}, "per_motion": per})
+    print(md)
+
+
+def _markdown(per: dict[str, dict[str, list[dict]]], args, efforts: list[str], left: int) -> str:
     table = [_cells(g, label, summary(ms)) for g, by_label in per.items() for label, ms in by_label.items()]
-    md = "\n".join([
+    pending = f" ({left} rows still to run)" if left else ""
+    return "\n".join([
         "# P with no outside hand: the search against the tracker", "",
         "Written by `python -m experiments.search_quality` (its docstring defines every column). Captured: the "
         f"first {args.captured_per} clips of each category and HDM05 class (at most {args.max_seconds:g} s); "
         f"generated: plain samples of {len(FAST_PROMPTS)} fast-motion prompts x {args.seeds} seeds, "
         f"{args.seconds:g} s. Search efforts: " + "; ".join(
             f"{e}: {EFFORTS[e].candidates} candidates x {EFFORTS[e].rounds} rounds, lookahead {EFFORTS[e].horizon}"
-            for e in efforts) + ".", "",
+            for e in efforts) + f"{pending}.", "",
         markdown_table(HEADER, table), ""])  # fmt: skip
-    meta = run_meta(__file__, argv, "plain", efforts=efforts, cost=args.cost or "default")
-    write_results(args.out, md, {"meta": meta, "per_motion": per})
-    print(md)
 
 
 if __name__ == "__main__":
