@@ -11,6 +11,8 @@ Layout of ``SYNTH/`` (one item per planned sample, ids ``s{index:06d}``, caption
     input_joints/<id>.npy          the pre-processed generated joints (T, 22, 3) float32
     input_joint_vecs/<id>.npy      their features (T-1, 263) float32
     texts/<id>.txt                 "caption#tokens#0.0#0.0" (tokens empty)
+    teacher/<id>.npz               with the search controller only: its teacher records (observations,
+                                   offsets per control step: physics/search.py ``save_teacher``)
 
 Every file is written atomically and an item's index row only after its files, so a killed run never
 counts half an item; a run on a folder with the same settings continues where it stopped.
@@ -76,8 +78,8 @@ class SynthConfig:
 
     def projection(self) -> ProjectionConfig:
         """P as Morph's selection uses it: no reset on failure, the episode stops where MPJPE passes tau."""
-        return ProjectionConfig(tau=self.tau, reset_on_fail=False, workers=1, ilc_passes=self.ilc_passes,
-                                controller=self.controller, policy=self.policy)  # fmt: skip
+        plain = ProjectionConfig(tau=self.tau, reset_on_fail=False, workers=1, ilc_passes=self.ilc_passes)
+        return plain.with_controller(self.controller, self.policy)
 
 
 @dataclass
@@ -269,6 +271,9 @@ def refine_item(joints: np.ndarray, preprocess_config: PreprocessConfig,
         "residual_force": helped["residual_force"],
         "residual_at_cap": helped["residual_at_cap"],
         "over_limit": float(np.mean(result.over_limit)),
+        # the search's teacher records (None under the tracker and the policy)
+        "teacher_obs": result.teacher_obs,
+        "teacher_offsets": result.teacher_offsets,
     }
 
 
@@ -385,6 +390,11 @@ def _write_item(out: Path, item: PlannedItem, res: dict, licence_tag: str) -> di
     _save_npy(out / "new_joint_vecs" / f"{item.id}.npy", np.asarray(res["sim_vecs"], dtype=np.float32))
     _save_npy(out / "input_joints" / f"{item.id}.npy", np.asarray(res["input_joints"], dtype=np.float32))
     _save_npy(out / "input_joint_vecs" / f"{item.id}.npy", np.asarray(res["input_vecs"], dtype=np.float32))
+    if res.get("teacher_obs") is not None:
+        records = {"observations": res["teacher_obs"], "offsets": res["teacher_offsets"],
+                   "text": np.array(item.caption), "licence_tag": np.array(licence_tag)}  # fmt: skip
+        (out / "teacher").mkdir(exist_ok=True)
+        write_atomic(out / "teacher" / f"{item.id}.npz", lambda f: np.savez_compressed(f, **records))
     line = f"{item.caption.replace('#', ' ')}##0.0#0.0\n".encode()
     write_atomic(out / "texts" / f"{item.id}.txt", lambda f: f.write(line))
     return {

@@ -15,6 +15,7 @@ against that raised reference.
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -275,7 +276,8 @@ def project(
     if not fps > 0:
         raise ShapeError(f"fps must be positive, got {fps}")
     if cfg.controller == "search" and not cfg.search.threads:  # the search's threads share the cores
-        per_worker = max(1, (os.cpu_count() or 1) // worker_count(cfg.workers, len(joints)))
+        inside_worker = multiprocessing.current_process().daemon  # a caller's worker: its siblings use the rest
+        per_worker = 1 if inside_worker else max(1, (os.cpu_count() or 1) // worker_count(cfg.workers, len(joints)))
         cfg = replace(cfg, search=replace(cfg.search, threads=per_worker))
     if len(joints) == 1 and on_step is not None:
         outs = [_project_one(joints[0], fps, cfg, on_step)]

@@ -185,3 +185,17 @@ def test_tilt_correction() -> None:
     np.testing.assert_allclose(fixed[:, 0], leaning[:, 0])  # the root's path is kept
     same, _ = correct_tilt(stand)
     np.testing.assert_array_equal(same, stand)  # under 10 degrees: untouched
+
+
+def test_synth_with_the_search_keeps_teacher_records(model, built_dir: Path, tmp_path: Path) -> None:
+    """Morph's data refined by the search controller: no outside help, and each item's teacher records."""
+    from physmotion.physics.search import effort
+
+    cfg = SynthConfig(sampler=SamplerConfig(steps=5), batch_size=1, max_frames=30, workers=1, controller="search")
+    assert cfg.projection().humanoid.cone == "elliptic" and cfg.projection().search == effort("default")
+    synthesize(None, built_dir, tmp_path / "s", cfg, captions=["a person jumps"], model=model)
+    row = index_rows(tmp_path / "s")[0]
+    assert float(row["residual_force"]) == 0.0 and float(row["over_limit"]) == 0.0
+    records = np.load(tmp_path / "s" / "teacher" / f"{row['id']}.npz")
+    assert records["observations"].shape[1] == 599 and records["offsets"].shape[1] == 63
+    assert str(records["text"]) == "a person jumps" and str(records["licence_tag"]) == row["licence_tag"]
