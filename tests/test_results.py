@@ -449,3 +449,33 @@ def test_limitations_quote_the_first_motion_bench() -> None:
     flat = " ".join(DOCS["limitations"].read_text().split())
     assert all(q in flat for q in quotes), [q for q in quotes if q not in flat]
 
+
+
+def search_quotes() -> list[str]:
+    """results/search_quality.json (P with no outside hand) as docs/limitations.md and results/README.md
+    quote it: the search at the default effort against the tracker."""
+    from experiments.search_quality import summary
+
+    per = _load("search_quality.json")["per_motion"]
+    cap, gen = (summary(per[g]["search default, elliptic"]) for g in ("captured", "generated"))
+    tracker = summary(per["captured"]["tracker, hand on, pyramidal"])
+    off = [summary(per[g]["tracker, hand off, pyramidal"])["completed"] for g in ("captured", "generated")]
+    return [
+        f"hand taken away fell in {100 * (1 - off[0]):.0f} % and {100 * (1 - off[1]):.0f} % of them",
+        f"{round(cap['completed'] * cap['motions'])} of {cap['motions']} captured clips",
+        f"{round(gen['completed'] * gen['motions'])} of {gen['motions']} generated",
+        f"world MPJPE {cap['mpjpe_mm']:.0f} mm (pelvis-relative {cap['rel_mpjpe_mm']:.0f})",
+        f"pelvis-relative {gen['rel_mpjpe_mm']:.0f} mm",
+        f"flight kept {gen['flight_kept']:.2f}",
+        f"Penetrate {cap['penetrate_out']:.1f} mm",
+        f"Skate {cap['skate_out']:.1f} mm against the input's {cap['skate_in']:.1f} (the tracker: "
+        f"{tracker['skate_out']:.1f})",
+        f"at or under the grounded sample's in {100 * gen['skate_not_above_in']:.0f} %",
+    ]
+
+
+@pytest.mark.parametrize("doc", ["limitations", "results"])
+def test_docs_quote_the_search_quality_table(doc: str) -> None:
+    flat = " ".join(DOCS[doc].read_text().split())
+    quotes = search_quotes()
+    assert all(q in flat for q in quotes), [q for q in quotes if q not in flat]
