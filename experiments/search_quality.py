@@ -44,6 +44,14 @@ FAST_PROMPTS = {  # kind -> prompt: generic wording of each kind of fast motion
     "hop": "a person hops forward on one foot",
     "kick": "a person kicks with the right leg",
 }
+HELDOUT_PROMPTS = {  # the same kinds in other words, for a check on prompts the settings were not tuned on
+    "run": "someone runs quickly in a straight line",
+    "jog": "a man jogs slowly ahead",
+    "sprint": "a person dashes forward as fast as possible",
+    "jump": "a person jumps in place twice",
+    "hop": "a person hops on the left leg",
+    "kick": "a person does a front kick",
+}
 FLIGHT_KINDS = ("jump", "hop")
 
 
@@ -60,17 +68,18 @@ def captured_set(mocap: str, hdm05: str, per: int, only: str = "") -> list[tuple
     return [(cat, info) for cat in keep for info in picked[cat][:per]]
 
 
-def generated_set(seconds: float, seeds: int) -> list[tuple[str, np.ndarray]]:
-    """(kind, joints (T, 22, 3) at 20 fps): plain samples of :data:`FAST_PROMPTS`, seed 0."""
+def generated_set(seconds: float, seeds: int, prompts: dict[str, str] = FAST_PROMPTS,
+                  seed: int = 0) -> list[tuple[str, np.ndarray]]:  # fmt: skip
+    """(kind, joints (T, 22, 3) at 20 fps): ``seeds`` plain samples of each of ``prompts`` (kind -> text)."""
     from physmotion.generate import GenerateConfig, generate
 
-    texts = list(FAST_PROMPTS.values())
-    result = generate(texts, GenerateConfig(seconds=seconds, num=seeds, physics="none", seed=0))
-    kinds = [kind for kind in FAST_PROMPTS for _ in range(seeds)]
+    texts = list(prompts.values())
+    result = generate(texts, GenerateConfig(seconds=seconds, num=seeds, physics="none", seed=seed))
+    kinds = [kind for kind in prompts for _ in range(seeds)]
     return [(kind, m.joints.astype(np.float64)) for kind, m in zip(kinds, result.motions)]
 
 
-def rows(efforts: list[str], cost: SearchCost | None) -> dict[str, ProjectionConfig]:
+def rows(efforts: list[str], cost: SearchCost | None, cone_row: bool = True) -> dict[str, ProjectionConfig]:
     """Row label -> P's config. The tracker with and without its hand, under MuJoCo's default pyramidal
     friction cone and under the elliptic one at impratio 10 (what the search runs on); the search at the
     default effort under the pyramidal cone, and at every effort in ``efforts`` under the elliptic one."""
@@ -82,7 +91,8 @@ def rows(efforts: list[str], cost: SearchCost | None) -> dict[str, ProjectionCon
         out[f"tracker, hand on, {label}"] = replace(plain, humanoid=humanoid)
         out[f"tracker, hand off, {label}"] = replace(plain, humanoid=humanoid, tracking=no_hand(plain.tracking))
     searches = [(name, elliptic, "elliptic") for name in efforts]
-    searches.insert(min(2, len(searches)), ("default", pyramidal, "pyramidal"))  # before the slowest
+    if cone_row:
+        searches.insert(min(2, len(searches)), ("default", pyramidal, "pyramidal"))  # before the slowest
     for name, humanoid, label in searches:
         search = effort(name)
         search = replace(search, cost=cost) if cost is not None else search
@@ -153,6 +163,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--max-seconds", type=float, default=6.0)
     parser.add_argument("--categories", default="", help="only captured categories containing these words")
     parser.add_argument("--cost", default="", help="JSON of SearchCost fields to override")
+    parser.add_argument("--prompt-set", choices=("fast", "heldout"), default="fast",
+                        help="FAST_PROMPTS, or HELDOUT_PROMPTS (the same kinds in other words)")
+    parser.add_argument("--seed", type=int, default=0, help="generation's seed")
+    parser.add_argument("--no-cone-row", action="store_true", help="leave out the search under the pyramidal cone")
     parser.add_argument("--out", default="results/search_quality", help="writes OUT.md and OUT.json")
     args = parser.parse_args(argv)
     warnings.filterwarnings("ignore", message=".*read as Latin-1")  # HDM05's header bytes, as documented
@@ -165,9 +179,10 @@ def main(argv: list[str] | None = None) -> None:
         joints = import_clip(info, floor="frame0").joints.astype(np.float64)
         motions.append(("captured", cat, joints[: int(args.max_seconds * FPS) + 1]))
     if args.seeds:
-        motions += [("generated", kind, j) for kind, j in generated_set(args.seconds, args.seeds)]
+        prompts = HELDOUT_PROMPTS if args.prompt_set == "heldout" else FAST_PROMPTS
+        motions += [("generated", kind, j) for kind, j in generated_set(args.seconds, args.seeds, prompts, args.seed)]
     print(f"{len(motions)} motions", flush=True)
-    configs = rows(efforts, cost)
+    configs = rows(efforts, cost, cone_row=not args.no_cone_row)
     meta = run_meta(__file__, argv, "plain", efforts=efforts, cost=args.cost or "default")
     per: dict[str, dict[str, list[dict]]] = {}
     seconds: dict[str, float] = {}
@@ -189,8 +204,8 @@ def _markdown(per: dict[str, dict[str, list[dict]]], args, efforts: list[str], l
         "# P with no outside hand: the search against the tracker", "",
         "Written by `python -m experiments.search_quality` (its docstring defines every column). Captured: the "
         f"first {args.captured_per} clips of each category and HDM05 class (at most {args.max_seconds:g} s); "
-        f"generated: plain samples of {len(FAST_PROMPTS)} fast-motion prompts x {args.seeds} seeds, "
-        f"{args.seconds:g} s. Search efforts: " + "; ".join(
+        f"generated: plain samples of {len(FAST_PROMPTS)} fast-motion prompts ({args.prompt_set} set, seed "
+        f"{args.seed}) x {args.seeds} samples, {args.seconds:g} s. Search efforts: " + "; ".join(
             f"{e}: {EFFORTS[e].candidates} candidates x {EFFORTS[e].rounds} rounds, lookahead {EFFORTS[e].horizon}"
             for e in efforts) + f"{pending}.", "",
         markdown_table(HEADER, table), ""])  # fmt: skip
