@@ -307,7 +307,7 @@ class SearchController:
         cost += c.height * (qpos[..., 2] - goal.qpos[idx, 2][None]) ** 2
         cost += c.velocity * np.sum((qvel[..., :3] - goal.qvel[idx, :3][None]) ** 2, axis=-1)
         if c.slip:
-            feet = bodies[:, :, self.layout_feet]  # (C, S, 4, 3)
+            feet = bodies[:, :, list(FOOT_JOINTS)]  # (C, S, 4, 3)
             prev = np.concatenate([feet[:, :1], feet[:, :-1]], axis=1)
             speed2 = np.sum((feet[..., :2] - prev[..., :2]) ** 2, axis=-1) / self.humanoid.control_dt**2
             low = feet[..., 2] < goal.stand_height[None, None]
@@ -316,10 +316,6 @@ class SearchController:
         fell = goal.fallen_many(qpos[..., 2], up, idx)
         fell = np.cumsum(fell, axis=1) > 0  # every step from the first fall on
         return cost + c.fall * fell, fell, np.mean(np.linalg.norm(rel, axis=-1), axis=-1)
-
-    @property
-    def layout_feet(self) -> list[int]:
-        return list(FOOT_JOINTS)
 
     def _bodies(self, qpos: np.ndarray) -> np.ndarray:
         """World positions (M, 22, 3) of the skeleton's bodies at qpos (M, nq), MuJoCo frame."""
