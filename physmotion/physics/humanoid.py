@@ -211,9 +211,9 @@ class HumanoidConfig:
     integrator: str = "implicitfast"  # Euler blows up: the actuators' kv is only implicit there
     solver: str = "Newton"
     iterations: int = 50
-    # Friction cone and the frictional-to-normal impedance ratio: MuJoCo's defaults (pyramidal, 1) let a
-    # loaded contact creep; elliptic with impratio 10 holds it (docs/decisions/projection.md: "a searching
-    # controller with no outside hand" has the figures of both).
+    # Friction cone and the frictional-to-normal impedance ratio: MuJoCo's defaults here; the search controller
+    # runs elliptic at impratio 10 (docs/decisions/projection.md: "a searching controller with no outside hand"
+    # has the figures of both).
     cone: str = "pyramidal"
     impratio: float = 1.0
     contact_excludes: tuple[tuple[str, str], ...] = DEFAULT_EXCLUDES

@@ -102,9 +102,9 @@ class ProjectionConfig:
                         search: SearchConfig | None = None) -> ProjectionConfig:  # fmt: skip
         """This P driven by ``controller`` ("tracker", "policy" loaded from ``policy``, or "search" at the
         effort ``search``, the default one if None). The search's humanoid has the elliptic friction cone at
-        impratio 10, under which its contacts creep less (docs/decisions/projection.md: "a searching
-        controller with no outside hand"); the tracker's keeps MuJoCo's default, as its figures were
-        measured."""
+        impratio 10 (better on its development clips, a wash on its whole table: docs/decisions/projection.md,
+        "a searching controller with no outside hand"); the tracker's keeps MuJoCo's default, as its figures
+        were measured."""
         humanoid = self.humanoid
         if controller == "search":
             humanoid = replace(humanoid, cone="elliptic", impratio=10.0)
