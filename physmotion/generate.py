@@ -7,8 +7,10 @@ the last 2 of the default sampler's 10 DPM-Solver++ steps, ``end:2,space:1``) or
 
 P in generation is :meth:`ProjectionConfig.sampling`: where the humanoid falls (its error passes 0.15 m)
 it is put back on the motion and the simulation goes on (reset-on-fail), so the output is always the
-simulation and never the kinematic input. Every reset is a jump in the output and is counted
-(``GenerateResult.resets``, ``generate.json``). ``morph`` uses ``GenerateConfig.morph_projection``
+simulation and never the kinematic input. The output is cross-faded onto the motion over the moments
+before each reset (``ProjectionConfig.crossfade``), so nothing jumps; those frames are not simulated and
+are marked (``Motion.reset_frames``). Every reset of every call of P is counted (``GenerateResult.resets``,
+``generate.json``). ``morph`` uses ``GenerateConfig.morph_projection``
 (:class:`ProjectionConfig`'s defaults: no reset, tau 0.5 m) with Morph's imitation selection
 (``GenerateResult.imitation_failed``; ``imitation_failure_rate`` in ``generate.json`` and the tables).
 """
@@ -266,10 +268,15 @@ def physics_summary(result: GenerateResult) -> str:
         return f"the simulated humanoid followed the motion without falling in all {len(log.tracked)} " \
             f"projections{helped}"
     with_reset = sum(r > 0 for r in result.resets)
-    return (f"the simulated humanoid fell in {falls} of {len(log.tracked)} projections; each time it was "
-            "put back onto the motion (a reset), which shows as a sudden jump in the output: "
-            f"{resets} such jump(s) in {with_reset} of {len(result.motions)} files written (per file in "
-            f"generate.json, 'resets'){helped}")
+    return (f"the simulated humanoid fell in {falls} of {len(log.tracked)} projections and was put back onto "
+            f"the motion {resets} time(s) in all, in {with_reset} of {len(result.motions)} motions; the output "
+            "is cross-faded onto the motion over the moments before each reset, frames that are not "
+            f"simulated (per motion in generate.json: 'resets', 'reset_frames'){helped}")
+
+
+def _frame_list(frames: np.ndarray | None) -> list[int] | None:
+    """The indices of the marked frames of a (T,) bool record, None where there is no record."""
+    return None if frames is None else np.flatnonzero(frames).tolist()
 
 
 def write_outputs(
@@ -304,13 +311,15 @@ def write_outputs(
         save_bvh(motion, base.with_suffix(".bvh"))
         files = [base.with_suffix(".npz"), base.with_suffix(".bvh")]
         if preview:
-            save_gif(base.with_suffix(".gif"), motion.joints, motion.fps, title=motion.texts[0])
+            save_gif(base.with_suffix(".gif"), motion.joints, motion.fps, title=motion.texts[0],
+                     not_simulated=motion.reset_frames)  # fmt: skip
             files.append(base.with_suffix(".gif"))
         else:
             base.with_suffix(".gif").unlink(missing_ok=True)  # a stale preview of another motion
         written += files
         motions.append({"prompt": motion.texts[0], "sample": int(stem.rsplit("_", 1)[1]),
-                        "files": [p.name for p in files], "resets": motion.resets})  # fmt: skip
+                        "files": [p.name for p in files], "resets": result.resets[i] if result.projections.calls else None,
+                        "reset_frames": _frame_list(motion.reset_frames)})  # fmt: skip
         if result.lengths:  # the length asked for, and whether the user gave it or the text's was predicted
             motions[-1]["seconds"] = round(result.lengths[i] / FPS, 2)
             motions[-1]["length_source"] = result.length_source[i]

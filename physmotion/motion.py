@@ -36,6 +36,11 @@ class Motion:
     at the cap (:func:`physmotion.metrics.report.residual_stats`); None where P was not applied.
     over_limit: (T,) bool, for P's output the frames in which a joint's torque passed its actuator's limit
     (``ProjectedMotion.over_limit``); None where P was not applied.
+    residual_peak: (T, 2) float32, the largest root residual of any update within each frame (``residual``
+    holds their mean); residual_at_cap: (T,) bool, frames in which an update was held at one of P's caps
+    (force, lift or torque); reset_frames: (T,) bool, frames that are not simulated: where the humanoid
+    was put back on the motion and the cross-fade before it (``ProjectedMotion.reset_frames``, over every
+    P call that made the motion). Each None where P was not applied (or the file predates it).
     """
 
     joints: np.ndarray
@@ -50,6 +55,9 @@ class Motion:
     residual: np.ndarray | None = None
     residual_cap: float | None = None
     over_limit: np.ndarray | None = None
+    residual_peak: np.ndarray | None = None
+    residual_at_cap: np.ndarray | None = None
+    reset_frames: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if np.asarray(self.joints).dtype.kind not in "fiu":
@@ -76,6 +84,19 @@ class Motion:
             if self.over_limit.shape != (self.num_frames,) or self.over_limit.dtype != bool:
                 shape, dtype = self.over_limit.shape, self.over_limit.dtype
                 raise ShapeError(f"over_limit must be bool (T,) = ({self.num_frames},), got {dtype} {shape}")
+        if self.residual_peak is not None:
+            self.residual_peak = np.asarray(self.residual_peak, dtype=np.float32)
+            if self.residual_peak.shape != (self.num_frames, 2) or not np.all(np.isfinite(self.residual_peak)):
+                shape = self.residual_peak.shape
+                raise ShapeError(f"residual_peak must be finite (T, 2) = ({self.num_frames}, 2), got {shape}")
+        for name in ("residual_at_cap", "reset_frames"):
+            value = getattr(self, name)
+            if value is not None:
+                value = np.asarray(value)
+                if value.shape != (self.num_frames,) or value.dtype != bool:
+                    got = f"{value.dtype} {value.shape}"
+                    raise ShapeError(f"{name} must be bool (T,) = ({self.num_frames},), got {got}")
+                setattr(self, name, value)
 
     @property
     def num_frames(self) -> int:
@@ -97,7 +118,7 @@ class Motion:
 
     def save(self, path: str | Path) -> None:
         """Write an .npz (joints, rotations, offsets, humanoid, resets, residual, residual_cap, over_limit,
-        fps, text, licence_tag) atomically."""
+        residual_peak, residual_at_cap, reset_frames, fps, text, licence_tag) atomically."""
         arrays: dict[str, np.ndarray] = {
             "joints": self.joints,
             "fps": np.float32(self.fps),
@@ -119,6 +140,11 @@ class Motion:
             arrays["residual_cap"] = np.float64(self.residual_cap)
         if self.over_limit is not None:
             arrays["over_limit"] = np.asarray(self.over_limit, dtype=bool)
+        if self.residual_peak is not None:
+            arrays["residual_peak"] = np.asarray(self.residual_peak, dtype=np.float32)
+        for name in ("residual_at_cap", "reset_frames"):
+            if getattr(self, name) is not None:
+                arrays[name] = np.asarray(getattr(self, name), dtype=bool)
         write_atomic(path, lambda f: np.savez(f, **arrays))
 
     @classmethod
@@ -150,6 +176,8 @@ class Motion:
                     residual=data["residual"] if "residual" in data else None,
                     residual_cap=float(data["residual_cap"]) if "residual_cap" in data else None,
                     over_limit=data["over_limit"] if "over_limit" in data else None,
+                    **{name: data[name] for name in ("residual_peak", "residual_at_cap", "reset_frames")
+                       if name in data},
                 )
                 _check_pose_arrays(motion, path)
                 return motion

@@ -41,6 +41,9 @@ _SHADOW = (215, 215, 210)
 _INK = (30, 30, 30)
 CONTACT_COLOUR = (230, 0, 200)
 """Foot joints in contact with the floor are drawn as dots of this colour (used by nothing else)."""
+RESET_COLOUR = (200, 0, 0)
+NOT_SIMULATED = "reset: not simulated"
+"""The words, in RESET_COLOUR, on a frame P did not simulate (``Motion.reset_frames``)."""
 _CHAIN_COLOURS = [(200, 60, 60), (60, 90, 200), (60, 160, 80), (230, 140, 30), (150, 70, 170)]
 MOTION_COLOURS: tuple[tuple[int, int, int], ...] = (
     (200, 60, 60), (60, 90, 200), (40, 150, 70), (230, 140, 30), (130, 70, 170), (20, 150, 160),
@@ -53,13 +56,15 @@ class Track:
     """One motion ready to draw at the common rate.
 
     joints: (N, 22, 3) float64 metres, Y up; contacts: (N, 4) bool in FOOT_JOINTS order; label: its name
-    in legends; colour: its RGB colour in the overlay layout and the viewer.
+    in legends; colour: its RGB colour in the overlay layout and the viewer; not_simulated: (N,) bool, the
+    frames P did not simulate (``Motion.reset_frames``: a reset and the cross-fade before it), or None.
     """
 
     label: str
     joints: np.ndarray
     contacts: np.ndarray
     colour: tuple[int, int, int]
+    not_simulated: np.ndarray | None = None
 
 
 # ------------------------------------------------------------------------------------------------
@@ -123,7 +128,8 @@ def common_rate(motions: Sequence[Motion]) -> tuple[float, int]:
 
 def align(motion: Motion, contacts: np.ndarray, fps: float, frames: int) -> tuple[np.ndarray, np.ndarray]:
     """A motion at ``fps`` over ``frames`` frames: joints (frames, 22, 3) linearly interpolated in time,
-    contacts (frames, 4) from the nearest source frame; past its end a motion holds its last frame."""
+    contacts (frames, ...) (or any per-frame flags) from the nearest source frame; past its end a motion
+    holds its last frame."""
     src = np.asarray(motion.joints, dtype=np.float64)
     pos = np.minimum(np.arange(frames) * motion.fps / fps, motion.num_frames - 1)  # source frame per frame
     lo = np.floor(pos).astype(int)
@@ -139,7 +145,8 @@ def make_tracks(motions: Sequence[Motion], labels: Sequence[str]) -> tuple[list[
     tracks = []
     for k, (motion, label) in enumerate(zip(motions, labels)):
         joints, contacts = align(motion, motion_contacts(motion), fps, frames)
-        tracks.append(Track(label, joints, contacts, MOTION_COLOURS[k % len(MOTION_COLOURS)]))
+        marked = None if motion.reset_frames is None else align(motion, motion.reset_frames, fps, frames)[1]
+        tracks.append(Track(label, joints, contacts, MOTION_COLOURS[k % len(MOTION_COLOURS)], marked))
     return tracks, fps
 
 
@@ -260,6 +267,10 @@ def draw_frame(tracks: Sequence[Track], k: int, targets: Sequence[np.ndarray], f
         for track in group:
             colour = None if layout == "side" else track.colour
             _draw_skeleton(panel_draw, cam, track.joints[k], track.contacts[k], colour)
+        resets = [t for t in group if t.not_simulated is not None and t.not_simulated[k]]
+        for i, track in enumerate(resets):  # P put the body back here: say so where it shows
+            words = NOT_SIMULATED if layout == "side" else f"{track.label}: {NOT_SIMULATED}"
+            panel_draw.text((size - 8, 8 + i * (small.size + 4)), words, fill=RESET_COLOUR, font=small, anchor="ra")
         img.paste(panel, (p * size, 0))
         if p > 0:
             draw.line([(p * size, 0), (p * size, size)], fill=_GRID_COLOUR, width=2)
@@ -348,12 +359,14 @@ def _require_av():
     return av
 
 
-def save_gif(path: str | Path, joints: np.ndarray, fps: float, title: str = "") -> None:
+def save_gif(path: str | Path, joints: np.ndarray, fps: float, title: str = "",
+             not_simulated: np.ndarray | None = None) -> None:  # fmt: skip
     """Write generate's animated GIF preview of one motion atomically: 320 px, the caption as title.
 
-    joints: (T, 22, 3) metres, Y up, floor at y = 0."""
+    joints: (T, 22, 3) metres, Y up, floor at y = 0; not_simulated: (T,) bool frames to mark as such."""
     motion = Motion(joints=joints, fps=fps)
-    tracks = [Track("", motion.joints.astype(np.float64), motion_contacts(motion), MOTION_COLOURS[0])]
+    tracks = [Track("", motion.joints.astype(np.float64), motion_contacts(motion), MOTION_COLOURS[0],
+                    None if not_simulated is None else np.asarray(not_simulated, dtype=bool))]
     _write_images(Path(path), render_frames(tracks, fps, "side", PREVIEW_SIZE, title, labels=False), fps)
 
 

@@ -62,6 +62,28 @@ def test_outputs_are_written(tiny_model, tmp_path: Path) -> None:
     assert Image.open(tmp_path / "out" / "a_person_walks_then_waves_s0_0.gif").n_frames == 48
     (summary,) = json.loads((tmp_path / "out" / "generate.json").read_text())["runs"]
     assert summary["licence_tag"] == "NC" and len(summary["files"]) == 6
+    assert all(m["resets"] is None and m["reset_frames"] is None for m in summary["motions"])  # no P, no record
+
+
+def test_resets_and_their_frames_are_one_count_everywhere(tiny_model, tmp_path: Path) -> None:
+    """PhysDiff's every call of P counts: the per-motion resets in the files and generate.json add up to
+    the run's total, each motion lists its frames that were not simulated, and the summary line says the
+    same numbers."""
+    from physmotion.generate import physics_summary
+
+    cfg = _cfg(physics="physdiff:end:2,space:1", num=2)
+    result = generate(["a person runs fast and jumps"], cfg, tiny_model)
+    write_outputs(result, tmp_path / "out", cfg, preview=False)
+    (run,) = json.loads((tmp_path / "out" / "generate.json").read_text())["runs"]
+    per_motion = [m["resets"] for m in run["motions"]]
+    assert sum(per_motion) == run["projections"]["resets_total"] == sum(result.projections.resets)
+    for entry, motion in zip(run["motions"], result.motions):
+        assert entry["resets"] == motion.resets
+        assert entry["reset_frames"] == np.flatnonzero(motion.reset_frames).tolist()
+        assert bool(entry["reset_frames"]) == (entry["resets"] > 0)
+    print(f"\nresets per motion {per_motion}")
+    assert run["projections"]["resets_total"] > 0  # the tiny model's runs fall: the count is exercised
+    assert f"{run['projections']['resets_total']} time(s) in all" in physics_summary(result)
 
 
 @pytest.mark.parametrize(
@@ -140,7 +162,10 @@ def test_projected_motions_record_their_cap_and_torque_limits(tiny_model) -> Non
                 continue
             assert m.residual_cap == pytest.approx(cap) and m.over_limit.shape == (m.num_frames,)
             row = residual_summary(m)
-            assert row["residual_at_cap"] == pytest.approx(np.mean(m.residual[:, 0] >= 0.99 * cap))
+            # every update's caps (force, lift, torque) count: at least the frames whose mean force is at its cap
+            assert row["residual_at_cap"] == pytest.approx(m.residual_at_cap.mean())
+            assert np.all(m.residual_at_cap[m.residual[:, 0] >= 0.99 * cap])
+            assert np.all(m.residual_peak >= m.residual - 1e-6) and m.reset_frames.shape == (m.num_frames,)
             assert row["over_limit"] == pytest.approx(m.over_limit.mean())
     plain = generate(["a person walks"], _cfg(), tiny_model).motions[0]
     assert plain.residual_cap is None and plain.over_limit is None and residual_summary(plain) == {}

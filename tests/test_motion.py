@@ -100,3 +100,25 @@ def test_a_joined_licence_tag_keeps_every_restriction() -> None:
     assert joined_licence_tag(["NC", "open"]) == "NC"  # Bandai (NC) and CMU (open): the mocap collection
     assert joined_licence_tag(["open", "SA", "NC"]) == "NC,SA"  # with HDM05 (CC BY-SA): both travel
     assert joined_licence_tag(["NC,SA", "SA"]) == "NC,SA" and joined_licence_tag(["open", "unknown"]) == "open"
+
+
+def test_the_help_in_full_and_the_reset_frames_travel_with_the_motion(tmp_path: Path) -> None:
+    """P's per-frame peaks, frames held at a cap and frames not simulated are saved and read back; a wrong
+    shape or dtype is refused, naming the field."""
+    peak = np.stack([np.linspace(0, 0.4, 10), np.linspace(0, 0.9, 10)], axis=-1)
+    at_cap, reset = np.arange(10) % 3 == 0, np.arange(10) >= 7
+    Motion(_standing(), residual=peak / 2, residual_peak=peak, residual_at_cap=at_cap, reset_frames=reset,
+           resets=1).save(tmp_path / "p.npz")  # fmt: skip
+    back = Motion.load(tmp_path / "p.npz")
+    np.testing.assert_array_equal(back.residual_peak, peak.astype(np.float32))
+    np.testing.assert_array_equal(back.residual_at_cap, at_cap)
+    np.testing.assert_array_equal(back.reset_frames, reset)
+    # a file written before these fields reads them as None
+    Motion(_standing(), residual=peak / 2).save(tmp_path / "old.npz")
+    assert Motion.load(tmp_path / "old.npz").reset_frames is None
+    with pytest.raises(ShapeError, match="reset_frames"):
+        Motion(_standing(), reset_frames=np.zeros(9, dtype=bool))
+    with pytest.raises(ShapeError, match="residual_at_cap"):
+        Motion(_standing(), residual_at_cap=np.zeros(10))
+    with pytest.raises(ShapeError, match="residual_peak"):
+        Motion(_standing(), residual_peak=np.full((10, 2), np.nan))

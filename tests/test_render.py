@@ -9,7 +9,7 @@ import pytest
 from PIL import Image
 
 from physmotion.motion import Motion
-from physmotion.render import CONTACT_COLOUR, motion_contacts, short_labels
+from physmotion.render import CONTACT_COLOUR, RESET_COLOUR, motion_contacts, short_labels
 from tests.cli_runner import invoke
 
 BANDAI_WALK = "bandai/Bandai-Namco-Research-Motiondataset-2/data/dataset-2_walk_normal_001.bvh"
@@ -81,6 +81,23 @@ def test_contacts_are_marked_on_contact_frames_only(walk: Path, tmp_path: Path) 
         assert Image.open(out).size == (480, 480)
         dots = _contact_pixels(out, above=450)  # the key at the bottom shows a dot on every frame
         assert (dots > 100) == expect and (dots == 0) != expect, (frame, dots, contacts[frame])
+
+
+def test_frames_p_did_not_simulate_are_marked(walk: Path, tmp_path: Path) -> None:
+    """A motion whose record marks frames 10-15 as not simulated (a reset and its cross-fade): those
+    frames carry the words in the reset colour, the others do not, side by side and overlaid."""
+    motion = Motion.load(walk)
+    marked = np.zeros(motion.num_frames, dtype=bool)
+    marked[10:16] = True
+    reset = tmp_path / "reset.npz"
+    replace(motion, reset_frames=marked).save(reset)
+    for layout in ("side", "overlay"):
+        for frame, expect in ((12, True), (30, False)):
+            out = tmp_path / f"{layout}{frame}.png"
+            res = run("render", reset, walk, "--layout", layout, "--frame", frame, "-o", out)
+            assert res.returncode == 0, res.stderr
+            red = int(np.all(np.asarray(Image.open(out).convert("RGB")) == RESET_COLOUR, axis=-1).sum())
+            assert (red > 30) == expect and (red == 0) != expect, (layout, frame, red)
 
 
 def test_overlay_png_of_a_bvh_imported_on_the_fly(mocap_dir: Path, walk: Path, tmp_path: Path) -> None:

@@ -26,7 +26,7 @@ from physmotion.diffusion.model import MotionDiffusion
 from physmotion.errors import PhysmotionError
 from physmotion.features.biomech import FEATURE_DIM_BIOMECH, extract_features_329
 from physmotion.features.humanml3d import FEATURE_DIM, extract_features, recover_from_ric
-from physmotion.physics.projection import ProjectionConfig, project
+from physmotion.physics.projection import ProjectionConfig, SimRecord, project
 
 
 def projection_settings(config: ProjectionConfig) -> dict[str, bool | float]:
@@ -66,13 +66,16 @@ class Projected:
 
     joints: list[np.ndarray]  # (T_i, 22, 3) P's output, physical coordinates (soles on the floor)
     bodies: list[np.ndarray]  # (22, 3) the humanoid body each was simulated with
-    resets: list[int]  # times the humanoid was put back onto the motion (a jump in the output)
-    residuals: list[np.ndarray]  # (T_i, 2) the root residual it used (ProjectedMotion.residual)
-    over_limit: list[np.ndarray]  # (T_i,) bool, a joint's torque past its actuator's limit
+    records: list[SimRecord]  # resets, residual, help, reset frames of each simulation
     selected: list[bool]  # the simulation was returned (not the input)
     tracked: list[bool]  # ... and the humanoid never fell (no reset)
     mpjpe_mm: list[float]  # mean distance to the input
     residual_force: list[float]  # mean root residual force, body weights
+
+    @property
+    def resets(self) -> list[int]:
+        """Times the humanoid was put back onto each motion (cross-faded in the output)."""
+        return [r.resets for r in self.records]
 
 
 @dataclass
@@ -96,6 +99,13 @@ class ProjectionLog:
         self.resets += done.resets
         return done
 
+    def resets_per_motion(self, n: int) -> list[int]:
+        """Per motion of a run whose every call projected the same ``n`` motions in order (PhysDiff, post,
+        Morph), its resets over all calls; zeros without a call."""
+        if len(self.resets) % max(n, 1):
+            raise ValueError(f"the log's {len(self.resets)} projections are not calls on the same {n} motions")
+        return [int(sum(self.resets[i::n])) for i in range(n)]
+
 
 class FeatureProjector:
     """P on normalised HumanML3D features: (B, T, 263) normalised + lengths -> same, physically projected.
@@ -115,8 +125,7 @@ class FeatureProjector:
         """Project a list of joint arrays (T_i, 22, 3) in the data convention; motions of equal length go
         through in one batch."""
         n = len(joints)
-        done = Projected(joints=[np.empty(0)] * n, bodies=[np.empty(0)] * n, resets=[0] * n,
-                         residuals=[np.empty(0)] * n, over_limit=[np.empty(0, bool)] * n,
+        done = Projected(joints=[np.empty(0)] * n, bodies=[np.empty(0)] * n, records=[None] * n,
                          selected=[False] * n, tracked=[False] * n, mpjpe_mm=[0.0] * n,
                          residual_force=[0.0] * n)  # fmt: skip
         by_len: dict[int, list[int]] = {}
@@ -125,8 +134,7 @@ class FeatureProjector:
         for idx in by_len.values():
             res = project(np.stack([joints[i] for i in idx]), self.fps, self.config)
             for k, i in enumerate(idx):
-                done.joints[i], done.bodies[i], done.resets[i] = res.joints[k], res.body[k], int(res.resets[k])
-                done.residuals[i], done.over_limit[i] = res.residual[k], res.over_limit[k]
+                done.joints[i], done.bodies[i], done.records[i] = res.joints[k], res.body[k], res.record(k)
                 done.selected[i], done.tracked[i] = bool(res.selected[k]), bool(res.success[k])
                 done.mpjpe_mm[i] = float(1000 * res.mpjpe[k].mean())
                 done.residual_force[i] = float(res.residual_force[k].mean())

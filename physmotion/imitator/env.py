@@ -98,8 +98,8 @@ class ImitationEnv:
         clip, cfg, rw = self.clip, self.config, self.config.reward
         a = np.clip(action, -1.0, 1.0)
         controller = _Offset(self._tracker, cfg.settings.action_scale * a)
-        force, torque, _ = control_step(clip.model, self.data, clip.ref, controller, self.k, cfg.humanoid,
-                                     clip.weight)  # fmt: skip
+        help_ = control_step(clip.model, self.data, clip.ref, controller, self.k, cfg.humanoid, clip.weight)
+        force, torque = help_.force, help_.torque
         self.k += 1
         k, data, ref = self.k, self.data, clip.ref
         bodies = data.xpos[clip.layout.body_ids]
@@ -134,6 +134,9 @@ class _Offset:
 
     def residual(self, data, ref, step, substeps):
         return self.tracker.residual(data, ref, step, substeps)
+
+    def caps(self):
+        return self.tracker.caps()
 
 
 __all__ = ["NUM_ACTIONS", "Clip", "EnvConfig", "ImitationEnv", "RewardConfig"]

@@ -258,7 +258,7 @@ def refine_item(joints: np.ndarray, preprocess_config: PreprocessConfig,
     x = preprocess(joints, preprocess_config)
     result = project(x, fps=FPS, config=projection)
     sim = result.simulated.astype(np.float32)
-    helped = residual_stats(result.residual, projection.residual_bound())
+    helped = residual_stats(result.residual, projection.residual_bound(), result.at_cap, result.residual_peak)
     return {
         "input_joints": x,
         "input_vecs": extract_features(x)[0],

@@ -52,8 +52,8 @@ def project_file(source: str | Path, out: str | Path, config: ProjectionConfig, 
         raise PhysmotionError("teacher records need the search controller: only the search makes them")
     motion = Motion.load(source)
     result = project(motion.joints, motion.fps, config, on_step=on_step)
-    sim = dict(humanoid=result.body, resets=int(result.resets), residual=result.residual,
-               residual_cap=config.residual_bound(), over_limit=result.over_limit)  # fmt: skip
+    # the input kept by imitation selection carries none of the simulation's records
+    sim = dict(humanoid=result.body, **result.record().motion_fields(config.residual_bound()))
     sim = sim if result.selected else dict.fromkeys(sim)
     if teacher:  # first, so that an output on disk means its records are there too
         from physmotion.physics.search import save_teacher
@@ -66,7 +66,8 @@ def project_file(source: str | Path, out: str | Path, config: ProjectionConfig, 
     if config.reset_on_fail:  # a preset that puts the fallen humanoid back on the motion (a jump in the output)
         kept += f", the humanoid put back onto the motion {int(result.resets)} time(s)"
     mpjpe = 1000 * float(result.mpjpe.mean())
-    helped = help_words(result.residual, config.residual_bound(), result.over_limit)
+    helped = help_words(result.residual, config.residual_bound(), result.over_limit, result.at_cap,
+                        result.residual_peak)  # fmt: skip
     summary = f"{kept}; MPJPE mean {mpjpe:.0f} mm, {helped}"
     return FileResult(source, out, bool(result.selected), int(result.resets), mpjpe, summary)
 

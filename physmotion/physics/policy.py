@@ -145,6 +145,9 @@ class PolicyController:
     def residual(self, data, ref: Reference, step: int, substeps: int) -> np.ndarray:
         return self.tracker.residual(data, ref, step, substeps)
 
+    def caps(self) -> tuple[float, float, float]:
+        return self.tracker.caps()
+
 
 DEFAULT_POLICY = WEIGHTS_DIR / "imitator"
 

@@ -85,8 +85,14 @@ class ProjectionConfig:
     controller: str = "tracker"
     policy: str | None = None
     search: SearchConfig = field(default_factory=SearchConfig)
+    # With reset_on_fail: seconds before each reset over which the output is cross-faded from the falling
+    # simulation onto the motion it is put back on, so no frame jumps (docs/decisions/projection.md: "resets
+    # as frames, cross-faded"). Those frames are not simulated: ``ProjectedMotion.reset_frames`` marks them.
+    crossfade: float = 0.25
 
     def __post_init__(self) -> None:
+        if not 0.0 <= self.crossfade <= 2.0:
+            raise ShapeError(f"crossfade must be in 0..2 seconds, got {self.crossfade}")
         if not (isinstance(self.ilc_passes, int) and 0 <= self.ilc_passes <= 20):
             raise ShapeError(f"ilc_passes must be an integer in 0..20, got {self.ilc_passes}")
         if not 0.0 < self.ilc_gain <= 1.0:
@@ -173,11 +179,16 @@ class ProjectedMotion:
     joints: (B, T, 22, 3) float32, the simulated motion where ``selected``, else the input.
     simulated: (B, T, 22, 3) float32, the simulated motion whatever happened.
     mpjpe: (B, T) metres, per-frame mean joint error of the simulation to the (raised) input.
-    residual_force, residual_torque: (B, T) root residual used, fractions of W and W x 1 m.
+    residual_force, residual_torque: (B, T) root residual used, fractions of W and W x 1 m: the mean over
+    the frame's control steps (the residual updates within them).
+    residual_force_peak, residual_torque_peak: (B, T) the largest residual of any update within them.
+    at_cap: (B, T) bool, frames in which some residual update was held at a cap (force, lift or torque).
+    reset_frames: (B, T) bool, frames that are not the simulation where it is returned: each reset's frame
+    and the ``ProjectionConfig.crossfade`` seconds before it, cross-faded onto the motion it is put back on.
     contacts: (B, T, 4) bool, left ankle, left foot, right ankle, right foot on the floor.
     success: (B,) the episode ran to the end without MPJPE passing the failure threshold.
     resets: (B,) int, how often the humanoid was put back on the reference (``reset_on_fail``): each is a
-    jump (teleport) in the simulated motion.
+    jump (teleport) in ``simulated``, cross-faded in ``joints``.
     With ``follow_drift`` a body that only drifted (or, with ``let_land``, fell short of a flight) counts as
     a success; its ``mpjpe`` to the input grows.
     selected: (B,) the simulation was kept (MPJPE below ``tau`` throughout, and the motion grounded).
@@ -207,6 +218,10 @@ class ProjectedMotion:
     grounded: np.ndarray
     ilc_pass: np.ndarray
     over_limit: np.ndarray
+    residual_force_peak: np.ndarray
+    residual_torque_peak: np.ndarray
+    at_cap: np.ndarray
+    reset_frames: np.ndarray
     teacher_obs: np.ndarray | None = None
     teacher_offsets: np.ndarray | None = None
 
@@ -214,6 +229,50 @@ class ProjectedMotion:
     def residual(self) -> np.ndarray:
         """(..., T, 2) float32: residual force and torque per frame, as :attr:`Motion.residual` stores it."""
         return np.stack([self.residual_force, self.residual_torque], axis=-1).astype(np.float32)
+
+    @property
+    def residual_peak(self) -> np.ndarray:
+        """(..., T, 2) float32: the per-frame peaks, as :attr:`Motion.residual_peak` stores them."""
+        return np.stack([self.residual_force_peak, self.residual_torque_peak], axis=-1).astype(np.float32)
+
+    def record(self, k: int | None = None) -> SimRecord:
+        """The simulation record of motion ``k`` of a batch (None: of an unbatched result)."""
+        at = (lambda a: a) if k is None else (lambda a: a[k])
+        return SimRecord(int(at(self.resets)), at(self.residual), at(self.residual_peak),
+                         at(self.at_cap).astype(bool), at(self.over_limit).astype(bool),
+                         at(self.reset_frames).astype(bool))  # fmt: skip
+
+
+@dataclass
+class SimRecord:
+    """What P recorded of one motion's simulation, as :class:`~physmotion.motion.Motion` stores it.
+
+    resets: times the humanoid was put back on the motion; residual, residual_peak: (T, 2) float32 root
+    residual per frame, mean and peak (force x W, torque x W x 1 m); at_cap: (T,) bool, a residual update
+    held at a cap; over_limit: (T,) bool, a joint's torque past its actuator's limit; reset_frames: (T,)
+    bool, frames not simulated (a reset and the cross-fade before it)."""
+
+    resets: int
+    residual: np.ndarray
+    residual_peak: np.ndarray
+    at_cap: np.ndarray
+    over_limit: np.ndarray
+    reset_frames: np.ndarray
+
+    def after(self, earlier: SimRecord | None) -> SimRecord:
+        """This record of P's output following ``earlier`` P calls on the same motion (PhysDiff's calls in
+        sampling, post's passes): the resets of every call counted, their frames marked."""
+        if earlier is None:
+            return self
+        return replace(self, resets=self.resets + earlier.resets,
+                       reset_frames=self.reset_frames | earlier.reset_frames)  # fmt: skip
+
+    def motion_fields(self, cap: float) -> dict:
+        """Keyword arguments of :class:`~physmotion.motion.Motion` for this record under a P whose force
+        cap is ``cap`` (x W)."""
+        return dict(resets=int(self.resets), residual=self.residual, residual_cap=cap, over_limit=self.over_limit,
+                    residual_peak=self.residual_peak, residual_at_cap=self.at_cap,
+                    reset_frames=self.reset_frames)  # fmt: skip
 
 
 def as_joints(motion: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -349,7 +408,7 @@ def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig,
                         reset_on_fail=config.reset_on_fail, follow_drift=config.follow_drift,
                         let_land=config.let_land)
         out = _back_to_input_rate(roll, model, lift, x, fps, ctrl_fps, config.tau, config.reset_on_fail,
-                                  grounded)
+                                  grounded, config.crossfade)  # fmt: skip
         score = (not bool(out["success"]), float(out["mpjpe"].mean()))
         if best is None or score < best[0]:
             best = (score, out | {"ilc_pass": np.array(ilc_pass)})
@@ -368,7 +427,7 @@ def _search_one(prep: PreparedMotion, x: np.ndarray, fps: float, config: Project
     search = SearchController(prep.model, config.search, config.humanoid, config.tracking)
     roll, record = search.run(ref, reset_on_fail=config.reset_on_fail, on_step=on_step)
     out = _back_to_input_rate(roll, prep.model, prep.lift, x, fps, 1.0 / config.humanoid.control_dt, np.inf,
-                              config.reset_on_fail, prep.grounded)  # fmt: skip
+                              config.reset_on_fail, prep.grounded, config.crossfade)  # fmt: skip
     return out | {"ilc_pass": np.array(0), "body": prep.body, "grounded": np.array(prep.grounded),
                   "teacher_obs": record.observations, "teacher_offsets": record.offsets.astype(np.float32)}
 
@@ -385,26 +444,80 @@ def _grounded(model, qpos: np.ndarray, rate: float, config: ProjectionConfig) ->
 
 def _back_to_input_rate(
     roll: Rollout, model, lift: float, joints: np.ndarray, fps: float, ctrl_fps: float, tau: float,
-    keep_simulated: bool = False, grounded: bool = True,
+    keep_simulated: bool = False, grounded: bool = True, crossfade: float = 0.0,
 ) -> dict[str, np.ndarray]:
     """One rollout (control rate) as arrays at the input rate, with imitation selection applied (unless
-    ``keep_simulated``: then the simulation, reset where it failed, is always returned)."""
-    t = len(joints)
+    ``keep_simulated``: then the simulation, reset where it failed and cross-faded over ``crossfade``
+    seconds before each reset, is always returned). A frame's help is over the control steps nearest to
+    it (:func:`_frame_of_steps`), so none is dropped where the control rate is the higher."""
+    t, n = len(joints), len(roll.qpos)
     sim = qpos_to_joints(resample_qpos(roll.qpos, ctrl_fps, fps, count=t), model)
     raised = joints + np.array([0.0, lift, 0.0])
-    mpjpe = np.linalg.norm(sim - raised, axis=-1).mean(-1)
-    nearest = np.minimum(np.round(np.arange(t) * ctrl_fps / fps).astype(int), len(roll.qpos) - 1)
+    owner = _frame_of_steps(n, ctrl_fps, fps, t)
+    # A reset's frame is the first at or after it: an earlier one interpolates the fallen and the reset states.
+    resets = np.zeros(t, dtype=bool)
+    resets[np.minimum(np.ceil(np.flatnonzero(roll.reset_steps) * fps / ctrl_fps - 1e-9).astype(int), t - 1)] = True
+    out_sim, faded = _crossfade(sim, raised, resets, int(round(crossfade * fps)))
+    mpjpe = np.linalg.norm(out_sim - raised, axis=-1).mean(-1)
     success = roll.failed_at is None
     selected = keep_simulated or (success and grounded and float(mpjpe.max()) < tau)
+    nearest = np.minimum(np.round(np.arange(t) * ctrl_fps / fps).astype(int), n - 1)
     return {
-        "joints": (sim if selected else joints).astype(np.float32),
+        "joints": (out_sim if selected else joints).astype(np.float32),
         "simulated": sim.astype(np.float32),
         "mpjpe": mpjpe,
-        "residual_force": roll.residual_force[nearest],
-        "residual_torque": roll.residual_torque[nearest],
+        "residual_force": _per_frame(roll.residual_force, owner, nearest, "mean"),
+        "residual_torque": _per_frame(roll.residual_torque, owner, nearest, "mean"),
+        "residual_force_peak": _per_frame(roll.residual_force_peak, owner, nearest, "max"),
+        "residual_torque_peak": _per_frame(roll.residual_torque_peak, owner, nearest, "max"),
+        "at_cap": _per_frame(roll.at_cap, owner, nearest, "max") > 0,
         "contacts": roll.contacts[nearest],
         "success": np.array(success),
         "selected": np.array(selected),
         "resets": np.array(roll.resets),
-        "over_limit": roll.over_limit[nearest],
+        "reset_frames": faded if selected else np.zeros(t, dtype=bool),
+        "over_limit": _per_frame(roll.over_limit, owner, nearest, "max") > 0,
     }
+
+
+def _frame_of_steps(n: int, ctrl_fps: float, fps: float, t: int) -> np.ndarray:
+    """(n,) int: the input frame (of t) nearest each control step, the frame whose help it counts in."""
+    return np.minimum(np.round(np.arange(n) * fps / ctrl_fps).astype(int), t - 1)
+
+
+def _per_frame(values: np.ndarray, owner: np.ndarray, nearest: np.ndarray, how: str) -> np.ndarray:
+    """(t,) float64: ``values`` (n,) per control step reduced over each frame's steps (``owner`` (n,), the
+    frame of each step) by ``how`` ("mean" or "max"); a frame that owns no step (an input faster than the
+    control rate) takes the value of its ``nearest`` (t,) step."""
+    v = np.asarray(values, dtype=np.float64)
+    t = len(nearest)
+    count = np.bincount(owner, minlength=t)
+    if how == "mean":
+        out = np.bincount(owner, weights=v, minlength=t) / np.maximum(count, 1)
+    else:
+        out = np.full(t, -np.inf)
+        np.maximum.at(out, owner, v)
+    empty = count == 0
+    out[empty] = v[nearest[empty]]
+    return out
+
+
+def _crossfade(sim: np.ndarray, raised: np.ndarray, resets: np.ndarray,
+               frames: int) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """The simulation sim (T, 22, 3) with each reset hidden: over the ``frames`` frames before a reset
+    frame (``resets`` (T,) bool) the falling body is blended (smoothstep) onto the motion it is put back
+    on (``raised`` (T, 22, 3), moved to meet the simulation at the reset frame), so no frame jumps. Returns
+    it and (T,) bool: the reset frames and the blended ones, which are not simulated."""
+    out, marked = sim.copy(), resets.copy()
+    prev = -1
+    for f in np.flatnonzero(resets):
+        start = max(f - frames, prev + 1)
+        span = f - start + 1  # the weight reaches 1 at the reset frame itself
+        if span > 1:
+            u = (np.arange(start, f) - start + 1) / span
+            w = (u * u * (3.0 - 2.0 * u))[:, None, None]
+            target = raised[start:f] + (sim[f] - raised[f])
+            out[start:f] = (1.0 - w) * sim[start:f] + w * target
+            marked[start:f] = True
+        prev = f
+    return out, marked

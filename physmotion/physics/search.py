@@ -191,6 +191,7 @@ class SearchController:
         level = -np.ones(n, dtype=int)
         costs = np.zeros(n)
         failed_at, resets = None, 0
+        reset_steps = np.zeros(n, dtype=bool)
         record = SearchRecord(offsets, level, costs)
         mean = np.zeros(model.nu)
         last = np.zeros(model.nu)  # the offset committed last, which a window blends from
@@ -234,6 +235,7 @@ class SearchController:
                     states[at + 1 :] = states[at]
                     break
                 resets += 1
+                reset_steps[at] = True
                 reset_state(model, data, ref, at)
                 states[at] = self._get(data)
                 mean, last = np.zeros(model.nu), np.zeros(model.nu)
@@ -246,6 +248,7 @@ class SearchController:
             if on_step is not None:
                 on_step(k, n - 1)
         roll, record.observations = self._rollout(ref, states, failed_at, resets)
+        roll.reset_steps = reset_steps
         return roll, record
 
     # --- the search of one window ------------------------------------------------------------------------

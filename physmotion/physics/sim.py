@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -36,6 +37,11 @@ class Rollout:
     (``follow_drift``) or let land (``let_land``).
     over_limit: (N,) bool, control steps in which a hinge's actuator force plus the joint torque applied
     directly (``qfrc_applied``: the tracker's feet-balance path) passed the actuator's force limit.
+    residual_force_peak, residual_torque_peak: (N,) the largest root residual of any residual update within
+    the step (the step's mean averages a peak away), fractions of W and W x 1 m.
+    at_cap: (N,) bool, steps in which some residual update was held at one of the controller's caps
+    (force, lift or torque: :meth:`~physmotion.physics.tracking.Controller.caps`).
+    reset_steps: (N,) bool, steps at which the humanoid was put back on the reference (``reset_on_fail``).
     """
 
     qpos: np.ndarray
@@ -47,6 +53,34 @@ class Rollout:
     resets: int = 0
     shifts: int = 0
     over_limit: np.ndarray | None = None  # (N,) bool: a hinge's total torque passed its actuator's limit
+    residual_force_peak: np.ndarray | None = None  # (N,) None: as the means (no residual)
+    residual_torque_peak: np.ndarray | None = None
+    at_cap: np.ndarray | None = None  # (N,) bool; None: never (no residual)
+    reset_steps: np.ndarray | None = None  # (N,) bool; None: no reset
+
+    def __post_init__(self) -> None:
+        n = len(self.qpos)
+        if self.residual_force_peak is None:
+            self.residual_force_peak = np.asarray(self.residual_force).copy()
+        if self.residual_torque_peak is None:
+            self.residual_torque_peak = np.asarray(self.residual_torque).copy()
+        if self.at_cap is None:
+            self.at_cap = np.zeros(n, dtype=bool)
+        if self.reset_steps is None:
+            self.reset_steps = np.zeros(n, dtype=bool)
+
+
+class StepHelp(NamedTuple):
+    """The outside help over one control step (:func:`control_step`): the root residual's mean and peak
+    over the step's residual updates (fractions of W, W x 1 m), whether a hinge's total torque passed its
+    actuator's limit, and whether some update was held at one of the controller's caps."""
+
+    force: float
+    torque: float
+    over_limit: bool
+    force_peak: float
+    torque_peak: float
+    at_cap: bool
 
 
 def _quiet_mujoco_warnings() -> None:
@@ -113,7 +147,8 @@ def simulate(
     qpos = np.zeros((n, model.nq))
     mpjpe = np.zeros(n)
     res_f, res_t = np.zeros(n), np.zeros(n)
-    over = np.zeros(n, dtype=bool)
+    peak_f, peak_t = np.zeros(n), np.zeros(n)
+    over, at_cap, reset_steps = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
     contacts = np.zeros((n, 4), dtype=bool)
     weight = float(model.body_subtreemass[0]) * STANDARD_GRAVITY
     reset_state(model, data, ref)
@@ -132,6 +167,7 @@ def simulate(
         if mpjpe[k] > fail_mpjpe and reset_on_fail and offset is None:
             failed_at = k if failed_at is None else failed_at
             resets += 1
+            reset_steps[k] = True
             reset_state(model, data, ref, k)
             qpos[k] = data.qpos
             mpjpe[k] = mpjpe_of(data, lay, ref.joints_mj[k])
@@ -142,39 +178,52 @@ def simulate(
             break
         if k == n - 1:
             break
-        res_f[k + 1], res_t[k + 1], over[k + 1] = control_step(model, data, ref, controller, k, cfg, weight)
-    return Rollout(qpos, mpjpe, res_f, res_t, contacts, failed_at, resets, shifts, over)
+        step = control_step(model, data, ref, controller, k, cfg, weight)
+        res_f[k + 1], res_t[k + 1], over[k + 1] = step.force, step.torque, step.over_limit
+        peak_f[k + 1], peak_t[k + 1], at_cap[k + 1] = step.force_peak, step.torque_peak, step.at_cap
+    return Rollout(qpos, mpjpe, res_f, res_t, contacts, failed_at, resets, shifts, over, peak_f, peak_t, at_cap,
+                   reset_steps)  # fmt: skip
 
 
 def control_step(
     model, data, ref: Reference, controller: Controller, k: int, config: HumanoidConfig, weight: float
-) -> tuple[float, float]:
+) -> StepHelp:
     """Advance ``data`` over control step k -> k+1 under ``controller``: its controls held, its root
-    residual recomputed every ``config.residual_every`` simulation steps. Returns the mean residual force
-    and torque over the step as fractions of ``weight`` (N) and ``weight`` x 1 m, and whether any hinge's
-    total torque (its actuator's force plus the joint torque the controller applies directly, as the
-    feet-balance path does) passed the actuator's limit at one of the residual updates."""
+    residual recomputed every ``config.residual_every`` simulation steps. Returns the residual force and
+    torque over the step, mean and peak, as fractions of ``weight`` (N) and ``weight`` x 1 m; whether any
+    hinge's total torque (its actuator's force plus the joint torque the controller applies directly, as
+    the feet-balance path does) passed the actuator's limit at one of the residual updates; and whether
+    one of the updates was held at a cap of the controller (force, lift or torque)."""
     import mujoco
 
     every = config.residual_every  # sim steps per root-residual update (one mj_step call of that many)
     ctrl, qfrc = controller.act(data, ref, k)
     data.ctrl[:] = ctrl
     data.qfrc_applied[:] = qfrc
-    force = torque = 0.0
-    over = False
+    force = torque = peak_f = peak_t = 0.0
+    over = held = False
+    cap_force, cap_lift, cap_torque = (_AT_CAP * c for c in controller.caps())
     limits = model.actuator_forcerange[:, 1]  # actuator i drives hinge dof 6 + i (humanoid.build_mjcf)
     for s in range(every, config.substeps + 1, every):
         # The wrench held over simulation steps s - every + 1 .. s is the one ending at step s.
         applied = qfrc + controller.residual(data, ref, k * config.substeps + s, config.substeps)
         data.qfrc_applied[:] = applied
         wrench = applied[:6]
-        force += math.hypot(*wrench[:3])
-        torque += math.hypot(*wrench[3:])
+        f, t = math.hypot(*wrench[:3]), math.hypot(*wrench[3:])
+        force, torque, peak_f, peak_t = force + f, torque + t, max(peak_f, f), max(peak_t, t)
+        # MuJoCo z is up: the lift cap bounds the upward force alone
+        held = held or (f > 0 and f >= cap_force) or (wrench[2] > 0 and wrench[2] >= cap_lift) or \
+            (t > 0 and t >= cap_torque)
         mujoco.mj_step(model, data, every)
         if applied[6:].any():
             over = over or bool(np.any(np.abs(data.actuator_force + applied[6:]) > 1.001 * limits))
     updates = config.substeps // every
-    return force / weight / updates, torque / weight / updates, over
+    return StepHelp(force / weight / updates, torque / weight / updates, over, peak_f / weight, peak_t / weight,
+                    held)  # fmt: skip
+
+
+# A residual within 0.1 % of a cap is held at it (the clip leaves it exactly at the cap, up to rounding).
+_AT_CAP = 0.999
 
 
 def contacts_of(model, data, foot_bodies: np.ndarray) -> np.ndarray:

@@ -159,6 +159,11 @@ class Controller(Protocol):
         wrench in rows 0..5, any joint torques the controller adds for it in the rest."""
         ...
 
+    def caps(self) -> tuple[float, float, float]:
+        """The bounds :meth:`residual` holds the root wrench to: force norm (N), upward force (N), torque
+        norm (N m); a residual at one of them is the most outside help the controller allows."""
+        ...
+
 
 def _foot_box_corners(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every box on the feet: geom ids (G,), body ids (G,) and local bottom-corner offsets (G, 4, 3)."""
@@ -259,6 +264,10 @@ class ModelBasedTracker:
         self._is_foot[feet] = True
         self._pyr = _pyramid(self.config.friction)
         self._fit_rows = np.array([1.0, 1.0, 1.0] + [self.config.feet_torque_weight] * 3)  # force, torque
+
+    def caps(self) -> tuple[float, float, float]:
+        """Force, lift (N) and torque (N m) bounds of the root residual."""
+        return self.max_force, self.max_lift, self.max_torque
 
     def act(self, data, ref: Reference, k: int) -> tuple[np.ndarray, np.ndarray]:
         """Actuator targets for the control step k -> k+1 (ctrl (nu,); qfrc (nv,) is zero here).

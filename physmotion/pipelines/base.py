@@ -16,7 +16,7 @@ from physmotion.diffusion.physdiff import ProjectionLog, projection_settings
 from physmotion.diffusion.samplers import SamplerConfig, sample
 from physmotion.features.humanml3d import recover_from_ric
 from physmotion.motion import Motion
-from physmotion.physics.projection import ProjectionConfig
+from physmotion.physics.projection import ProjectionConfig, SimRecord
 from physmotion.pipelines.result import GenerateResult
 
 # on_step(done, total): progress over the sampling steps and P's applications after sampling
@@ -26,20 +26,23 @@ Progress = Callable[[int, int], None]
 @dataclass
 class Physical:
     """The motions after a method's physics, per motion: joints (T, 22, 3); the humanoid body (22, 3) they
-    are the simulation (or surface) of, or None; resets, root residual (T, 2) and frames with a joint's
-    torque over its actuator's limit (T,) bool of that simulation (``over_limit``: empty without one)."""
+    are the simulation (or surface) of, or None; what P recorded of that simulation over every call that
+    made it (resets, help, reset frames), or None where the output is no simulation."""
 
     joints: list[np.ndarray]
     bodies: list[np.ndarray | None]
-    resets: list[int]
-    residuals: list[np.ndarray | None]
+    records: list[SimRecord | None]
     failed: list[bool] = field(default_factory=list)  # Morph's imitation selection kept the input
-    over_limit: list[np.ndarray | None] = field(default_factory=list)
 
     @classmethod
     def kinematic(cls, joints: list[np.ndarray]) -> Physical:
         """Motions that were not simulated on a body."""
-        return cls(list(joints), [None] * len(joints), [0] * len(joints), [None] * len(joints))
+        return cls(list(joints), [None] * len(joints), [None] * len(joints))
+
+    @property
+    def resets(self) -> list[int]:
+        """Per motion, the times P put the humanoid back on it over every call (0 without P)."""
+        return [r.resets if r is not None else 0 for r in self.records]
 
 
 class Pipeline:
@@ -77,17 +80,15 @@ class Pipeline:
         joints = [recover_from_ric(f.astype(np.float64)) for f in feats]
         after = (lambda k: on_step(self.sampler.steps + k, total)) if on_step else None
         done = self._after(joints, log, after) if last is None else last
-        over = done.over_limit or [None] * len(prompts)
         cap = self.projection.residual_bound() if self.projects else None
         motions = [
             Motion(joints=j, fps=FPS, texts=[p], licence_tag=self.model.licence_tag,
                    source=f"physmotion generate ({self.name})", humanoid=b,
-                   **(dict(resets=r, residual=res, residual_cap=cap, over_limit=o)
-                      if self.projects and b is not None else {}))
-            for j, p, b, r, res, o in zip(done.joints, prompts, done.bodies, done.resets, done.residuals, over)
+                   **(r.motion_fields(cap) if self.projects and b is not None and r is not None else {}))
+            for j, p, b, r in zip(done.joints, prompts, done.bodies, done.records)
         ]  # fmt: skip
-        return GenerateResult(motions=motions, features=list(feats), projections=log, resets=list(done.resets),
-                              imitation_failed=done.failed, lengths=lengths, settings=self.settings())  # fmt: skip
+        return GenerateResult(motions=motions, features=list(feats), projections=log,
+                              resets=log.resets_per_motion(len(prompts)), imitation_failed=done.failed, lengths=lengths, settings=self.settings())  # fmt: skip
 
     def _sample(self, prompts: list[str], lengths: list[int], seed: int, log: ProjectionLog,
                 on_step: Progress | None) -> tuple[torch.Tensor, Physical | None]:  # fmt: skip

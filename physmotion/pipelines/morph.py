@@ -41,9 +41,8 @@ class MorphPipeline(Pipeline):
         # A kept input is the pre-processed motion with its first frame's lowest point on the floor; it was
         # not simulated on a body, so it has none.
         out = Physical(joints=[floor_first_frame(j, physical=True) if f else j for j, f in zip(done.joints, failed)],
-                       bodies=[None if f else b for b, f in zip(done.bodies, failed)], resets=done.resets,
-                       residuals=[None if f else r for r, f in zip(done.residuals, failed)], failed=failed,
-                       over_limit=[None if f else o for o, f in zip(done.over_limit, failed)])  # fmt: skip
+                       bodies=[None if f else b for b, f in zip(done.bodies, failed)],
+                       records=[None if f else r for r, f in zip(done.records, failed)], failed=failed)  # fmt: skip
         if on_projection:
             on_projection(1)
         return out

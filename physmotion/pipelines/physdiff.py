@@ -13,14 +13,18 @@ import torch
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.physdiff import FeatureProjector, Projected, ProjectionLog, on_data_floor
 from physmotion.diffusion.samplers import SamplerConfig, sample
-from physmotion.physics.projection import ProjectionConfig
+from physmotion.physics.projection import ProjectionConfig, SimRecord
 from physmotion.pipelines.base import Physical, Pipeline, Progress
 from physmotion.pipelines.modes import DEFAULT_SCHEDULE, PhysicsMode
 
 
-def _physical(done: Projected) -> Physical:
-    return Physical(done.joints, list(done.bodies), done.resets, list(done.residuals),
-                    over_limit=list(done.over_limit))
+def _physical(calls: list[Projected]) -> Physical:
+    """The last of P's calls on the same motions as the output, with every call's resets counted in its
+    records (a fall in an earlier call is one the user should know of, though sampling went on from it)."""
+    records: list[SimRecord | None] = [None] * len(calls[-1].joints)
+    for done in calls:
+        records = [r.after(before) for r, before in zip(done.records, records)]
+    return Physical(list(calls[-1].joints), list(calls[-1].bodies), records)
 
 
 class PhysDiffPipeline(Pipeline):
@@ -50,7 +54,7 @@ class PhysDiffPipeline(Pipeline):
         if self.steps[-1:] == [self.sampler.steps - 1]:
             # The last step was projected, and DDIM's last step returns x0 itself: the output is P's
             # simulated motion, kept in physical coordinates (soles on the floor) rather than re-floored.
-            return x, _physical(done[-1])
+            return x, _physical(done)
         return x, None
 
 
@@ -72,11 +76,12 @@ class PostProjectionPipeline(Pipeline):
     def _after(self, joints: list[np.ndarray], log: ProjectionLog,
                on_projection: Callable[[int], None] | None) -> Physical:  # fmt: skip
         projector = FeatureProjector(self.model, self.projection)
-        out = Physical.kinematic(joints)
+        given, calls = list(joints), []
         for k in range(self.mode.projections):
             # the sampled motion in P's convention first, then each pass's output on its lowest joint
-            given = [on_data_floor(j) for j in out.joints] if k else projector.data_floor(out.joints)
-            out = _physical(log.add(projector.project_joints(given)))
+            given = [on_data_floor(j) for j in given] if k else projector.data_floor(given)
+            calls.append(log.add(projector.project_joints(given)))
+            given = calls[-1].joints
             if on_projection:
                 on_projection(k + 1)
-        return out
+        return _physical(calls)

@@ -29,4 +29,4 @@ class FloorPipeline(Pipeline):
         from physmotion.physics.surface import ground_on_surface
 
         grounded, bodies = (list(z) for z in zip(*(ground_on_surface(j) for j in joints)))
-        return Physical(grounded, bodies, [0] * len(joints), [None] * len(joints))
+        return Physical(grounded, bodies, [None] * len(joints))

@@ -56,7 +56,8 @@ def lateral_offsets(tracks: Sequence[Track]) -> np.ndarray:
 
 def scene_data(tracks: Sequence[Track], fps: float) -> dict:
     """The page's JSON: skeleton, rate, and per motion its label, colour, X offset, joints (N * 22 * 3
-    integers, mm, frame-major) and contacts (N integers, bit i = FOOT_JOINTS[i] touching the floor)."""
+    integers, mm, frame-major), contacts (N integers, bit i = FOOT_JOINTS[i] touching the floor) and
+    not_simulated (the indices of the frames P did not simulate: ``Track.not_simulated``)."""
     offsets = lateral_offsets(tracks)
     motions = []
     for track, dx in zip(tracks, offsets):
@@ -68,6 +69,7 @@ def scene_data(tracks: Sequence[Track], fps: float) -> dict:
             "offset": round(float(dx), 3),
             "joints": mm.reshape(-1).tolist(),
             "contacts": bits.tolist(),
+            "not_simulated": [] if track.not_simulated is None else np.flatnonzero(track.not_simulated).tolist(),
         })  # fmt: skip
     return {
         "fps": fps,

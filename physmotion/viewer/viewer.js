@@ -166,6 +166,8 @@
   window.addEventListener("resize", resize);
   resize();
 
+  const reset = document.getElementById("reset");
+  const resetFrames = new Map(motions.map((m) => [m, new Set(m.not_simulated || [])]));
   const play = document.getElementById("play");
   const scrub = document.getElementById("scrub");
   const readout = document.getElementById("time");
@@ -194,6 +196,10 @@
       scrub.value = String(f);
       readout.textContent = `${(f / fps).toFixed(2)} / ${duration.toFixed(2)} s  (frame ${f + 1}/${frames})`;
       status.dataset.frame = String(f);
+      // frames P did not simulate (a reset and the cross-fade before it), as physmotion render marks them
+      const marked = motions.filter((m) => resetFrames.get(m).has(f)).map((m) => m.label);
+      reset.textContent = marked.length ? `reset: not simulated (${marked.join(", ")})` : "";
+      status.dataset.reset = marked.length ? "1" : "0";
     }
     if (follow.checked) {
       const now = rootCentre(f, new THREE.Vector3());

@@ -76,3 +76,21 @@ def test_help_pooled_over_motions() -> None:
     other_cap = Motion(joints=joints, residual=np.zeros((2, 2), np.float32), residual_cap=0.3)
     assert "residual_at_cap" not in help_stats([a, other_cap]) and "over_limit" not in help_stats([a, other_cap])
     assert help_stats([Motion(joints=joints)]) == {}
+
+
+def test_the_share_at_a_cap_counts_every_cap_where_the_file_records_it() -> None:
+    """A file that records which frames were held at a cap (force, lift or torque, any residual update)
+    is read by that record, not by its mean force alone: here no frame's mean force is at the cap, yet
+    two frames were held (a lift or torque cap, or a peak averaged away). Peaks are reported too."""
+    joints = np.zeros((4, 22, 3), np.float32)
+    residual = np.full((4, 2), 0.05, np.float32)
+    peak = np.array([[0.3, 0.9], [0.1, 1.0], [0.05, 0.05], [0.05, 0.05]], np.float32)
+    held = np.array([True, True, False, False])
+    m = Motion(joints=joints, residual=residual, residual_cap=0.3, residual_peak=peak, residual_at_cap=held)
+    row = residual_summary(m)
+    assert row["residual_at_cap"] == pytest.approx(0.5)
+    assert residual_stats(residual, 0.3)["residual_at_cap"] == 0.0  # the mean-force rule sees none
+    assert row["residual_torque_peak_p95"] == pytest.approx(np.percentile(peak[:, 1], 95))
+    line = residual_line(m.residual, 0.3, None, held, peak)
+    assert "held at a cap (force 0.30 W, lift or torque) in 50.0 % of frames" in line and "peak p95" in line
+    assert residual_stats(residual, 0.0, held)["residual_at_cap"] == 0.0  # no hand: nothing to be held by

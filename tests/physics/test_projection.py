@@ -134,6 +134,34 @@ def test_follow_drift_moves_the_motion_to_a_body_that_drifted(walk: np.ndarray) 
     assert followed.mpjpe.max() > 0.5  # it was moved: far from the input's absolute positions
 
 
+def test_a_reset_is_cross_faded_and_its_frames_marked(walk: np.ndarray) -> None:
+    """The sliding walk above, reset where it falls behind: the simulation teleports (a jump of a third of
+    a metre in one frame), the output does not. Over the 0.25 s before each reset the output is blended
+    onto the motion it is put back on; those frames and the reset's are marked as not simulated, and no
+    joint moves more from frame to frame there than the input's fastest joint + 2 cm (issue 62's line)."""
+    root = walk[:, 0, :] - walk[0, 0, :]
+    sliding = walk + 1.5 * root[:, None, :] * np.array([1.0, 0.0, 1.0])
+    out = project(sliding, config=ProjectionConfig.sampling(tau=0.3, follow_drift=False))
+    hard = project(sliding, config=ProjectionConfig.sampling(tau=0.3, follow_drift=False, crossfade=0.0))
+
+    def steps(j: np.ndarray) -> np.ndarray:  # (T - 1,) the fastest joint's move into each frame
+        return np.linalg.norm(np.diff(j, axis=0), axis=-1).max(axis=-1)
+
+    marked = np.flatnonzero(out.reset_frames)
+    resets = marked[np.r_[np.diff(marked) > 1, True]]  # the last marked frame of each run
+    fastest_in = float(steps(sliding).max())
+    print(f"\nresets {int(out.resets)} at frames {resets.tolist()}; fastest joint per frame: input {fastest_in:.3f} "
+          f"m; into the reset frames, simulated {np.round(steps(out.simulated)[resets - 1], 2).tolist()}, output "
+          f"{np.round(steps(out.joints)[resets - 1], 2).tolist()} m")
+    assert out.resets >= 1 and np.array_equal(out.simulated, hard.simulated)  # the fade changes the output alone
+    assert np.all(steps(hard.joints)[resets - 1] > 0.25)  # each reset a teleport of more than a quarter metre
+    # 5 frames (0.25 s at 20 fps) before each reset and the reset's own; the rest is the simulation
+    assert len(marked) == 6 * int(out.resets) and not hard.reset_frames[~np.isin(np.arange(80), resets)].any()
+    assert np.array_equal(out.joints[~out.reset_frames], out.simulated[~out.reset_frames])
+    into = np.unique(np.concatenate([marked - 1, marked]))  # every move into and within the fades
+    assert steps(out.joints)[into[into < 79]].max() <= fastest_in + 0.02
+
+
 def test_a_body_short_of_a_flight_lands_instead_of_being_reset(walk: np.ndarray) -> None:
     """The walk lifted by up to 0.3 m for 0.8 s, as a generated jump higher than the humanoid can push
     off for: the simulated body walks on below the motion, in its pose. Reset (``let_land`` off), it

@@ -46,6 +46,9 @@ def test_physdiff_returns_its_projections_in_the_prompts_order(model: MotionDiff
     assert [len(m.joints) for m in res.motions] == LENGTHS  # the last projection is the output
     assert all(m.humanoid is not None and m.residual.shape == (len(m.joints), 2) for m in res.motions)
     assert res.resets == [m.resets for m in res.motions]
+    # every call's resets are the motion's: a fall in the first call is not forgotten by the second
+    assert res.resets == [res.projections.resets[i] + res.projections.resets[i + len(PROMPTS)]
+                          for i in range(len(PROMPTS))]  # fmt: skip
     assert res.settings["pipeline"] == "PhysDiffPipeline" and res.settings["projection"]["reset_on_fail"]
     _no_state_left(pipeline)
     again = pipeline(PROMPTS, LENGTHS, seed=1)  # a second call starts from nothing and is deterministic
