@@ -903,6 +903,13 @@ def serve_cmd(
     model: Path | None = typer.Option(None, help=MODEL_HELP),
     physics: str = typer.Option("physdiff", help="The page's and the JSON endpoint's default physics mode "
                                 "(any of generate's; a request may name another)."),
+    seconds: float | None = typer.Option(None, help="The page's and the JSON endpoint's default length in "
+                                         "seconds (default: predicted from each prompt; a request may give "
+                                         "its own)."),
+    allow_host: list[str] = typer.Option([], "--allow-host", help="A Host name (or address) to answer besides "
+                                         "localhost, 127.0.0.1, [::1] and --host, e.g. this machine's name on "
+                                         "the network when --host is 0.0.0.0; '*.example.org' for its "
+                                         "subdomains, '*' for any (no DNS rebinding guard). Repeatable."),
     waiting: int = typer.Option(4, help="Requests that may wait behind the one being generated; past that the "
                                 "server answers 503 (busy) at once."),
     steps: int | None = typer.Option(None, help="Sampling steps, as generate's --steps: fewer answer sooner "
@@ -917,8 +924,10 @@ def serve_cmd(
         raise PhysmotionError(f"physmotion serve needs the 'serve' extra ({exc.name} is missing): "
                               "pip install 'physmotion[serve]'") from None
     check_physics(physics)
+    config = ServeConfig(physics=physics, seconds=seconds, waiting=waiting, steps=steps, host=host,
+                         allowed_hosts=tuple(allow_host))  # fmt: skip
     sock = bind(host, port)
-    app_ = make_app(_model_dir(model), ServeConfig(physics=physics, waiting=waiting, steps=steps),
+    app_ = make_app(_model_dir(model), config,
                     log=lambda line: console.print(line, highlight=False))
     if host not in ("127.0.0.1", "localhost", "::1"):
         _warn(f"listening on {host}: other machines can reach this server")

@@ -8,13 +8,14 @@ import io
 import json
 import os
 import re
+import socket
 import subprocess
 import sys
 import threading
 import time
 import urllib.error
 import urllib.request
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -23,6 +24,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from physmotion.diffusion.model import MotionDiffusion
+from physmotion.errors import PhysmotionError
 from physmotion.generate import GenerateConfig, generate
 from physmotion.motion import Motion
 from physmotion.serve import ServeConfig, bind, make_app, url_of
@@ -42,9 +44,15 @@ def net() -> MotionDiffusion:
     return MotionDiffusion.load()
 
 
+def _client(app) -> TestClient:
+    """A TestClient that names the server as a browser on this machine does (TestClient's own 'testserver'
+    is a foreign Host, which the server refuses)."""
+    return TestClient(app, base_url="http://localhost:8000")
+
+
 @pytest.fixture(scope="module")
 def client(net: MotionDiffusion) -> Iterator[TestClient]:
-    with TestClient(make_app(net, ServeConfig(physics="none", seconds=2.0))) as c:
+    with _client(make_app(net, ServeConfig(physics="none", seconds=2.0))) as c:
         yield c
 
 
@@ -155,7 +163,7 @@ def test_unknown_motion_and_route_are_json_404(client: TestClient) -> None:
 
 def test_busy_server_refuses_with_503_and_answers_every_request(net: MotionDiffusion) -> None:
     app = make_app(net, ServeConfig(physics="none", seconds=2.0, waiting=1, warmup=False))
-    with TestClient(app) as c, ThreadPoolExecutor(6) as pool:
+    with _client(app) as c, ThreadPoolExecutor(6) as pool:
         answers = list(pool.map(lambda _: c.post("/api/generate", json={"text": WALK}), range(6)))
         codes = sorted(a.status_code for a in answers)
         assert set(codes) <= {200, 503} and codes.count(200) >= 1 and 503 in codes, codes
@@ -170,7 +178,7 @@ def test_steps_as_generate_takes_them(net: MotionDiffusion) -> None:
 
     from physmotion.diffusion.samplers import default_sampler
 
-    with TestClient(make_app(net, ServeConfig(physics="none", seconds=2.0, steps=10, warmup=False))) as c:
+    with _client(make_app(net, ServeConfig(physics="none", seconds=2.0, steps=10, warmup=False))) as c:
         got = np.array(c.post("/api/generate", json={"text": WALK, "seed": 1}).json()["joints"])
     config = GenerateConfig(seconds=2.0, physics="none", seed=1, sampler=replace(default_sampler(net), steps=10))
     np.testing.assert_allclose(got, generate([WALK], config, net).motions[0].joints, atol=5.1e-5)
@@ -180,14 +188,114 @@ def test_serve_refuses_bad_options_before_loading_the_model() -> None:
     start = time.perf_counter()
     res = invoke("serve", "--physics", "bogus")
     assert res.returncode == 1 and "unknown physics mode 'bogus'" in res.stderr
+    res = invoke("serve", "--port", "0", "--allow-host", "evil*.org")
+    assert res.returncode == 1 and "allowed host 'evil*.org' is not a host name" in res.stderr, res.stderr
+    assert "Traceback" not in res.stderr
     with bind("127.0.0.1", 0) as taken:
         res = invoke("serve", "--port", taken.getsockname()[1])
     assert res.returncode == 1 and "cannot listen on 127.0.0.1" in res.stderr and "--port" in res.stderr
     assert time.perf_counter() - start < 5
 
 
+# Prompts outside Latin-1: (prompt, the file's stem, its ASCII fallback)
+NON_LATIN = [("人が前に歩く", "人が前に歩く", "motion"), ("человек идёт вперёд", "человек_идёт_вперёд", "motion"),
+             ("człowiek idzie naprzód", "człowiek_idzie_naprzód", "czowiek_idzie_naprzod")]  # fmt: skip
+
+
+@pytest.mark.parametrize(("text", "stem", "ascii_stem"), NON_LATIN, ids=["cjk", "cyrillic", "polish"])
+def test_downloads_of_a_non_latin_prompt(client: TestClient, text: str, stem: str, ascii_stem: str) -> None:
+    """The file name goes out as RFC 6266 asks: an ASCII `filename` and the UTF-8 `filename*`; the header
+    used to be the name as Latin-1, which a Cyrillic or CJK prompt broke (500)."""
+    from urllib.parse import unquote
+
+    got = client.post("/api/generate", json={"text": text, "seed": 4, **QUICK}).json()
+    for suffix in (".npz", ".bvh"):
+        res = client.get(got["files"][suffix[1:]])
+        assert res.status_code == 200, res.text
+        header = res.headers["content-disposition"]
+        fallback = re.fullmatch(r'attachment; filename="([\x20-\x7e]+)"; filename\*=UTF-8\'\'([A-Za-z0-9%._-]+)', header)
+        assert fallback, header
+        assert unquote(fallback[2], errors="strict") == f"{stem}_s4_{got['id']}{suffix}"
+        assert fallback[1] == f"{ascii_stem}_s4_{got['id']}{suffix}"
+    assert _load_npz(client.get(got["files"]["npz"]).content).texts == [text]
+
+
+def test_a_body_over_the_limit_is_refused_unread(client: TestClient) -> None:
+    """413 before the JSON is parsed: a body that is not even JSON gets 413, not 422; with or without a
+    Content-Length (a generator body goes out chunked). A body just within the limit is served."""
+    limit = ServeConfig().max_body
+    assert limit == 16 * 1024
+    big = b"x" * (limit + 1)
+    res = client.post("/api/generate", content=big, headers={"Content-Type": "application/json"})
+    assert res.status_code == 413, res.text
+    assert res.json() == {"error": f"the request body is {limit + 1} bytes; this server takes at most {limit} "
+                                   "bytes (a prompt of at most a few hundred characters)"}  # fmt: skip
+    res = client.post("/api/generate", content=(big[i:i + 4096] for i in range(0, len(big), 4096)),
+                      headers={"Content-Type": "application/json"})  # fmt: skip
+    assert "content-length" not in res.request.headers and res.request.headers["transfer-encoding"] == "chunked"
+    assert res.status_code == 413 and "over the limit" in res.json()["error"], res.text
+    body = json.dumps({"text": WALK, **QUICK}).encode()
+    padded = body[:-1] + b" " * (limit - len(body)) + b"}"  # JSON allows the white space
+    assert len(padded) == limit
+    assert client.post("/api/generate", content=padded, headers={"Content-Type": "application/json"}).status_code == 200
+
+
+@pytest.mark.parametrize(("bound", "allowed", "host", "ok"), [
+    ("127.0.0.1", (), "localhost:8000", True),
+    ("127.0.0.1", (), "127.0.0.1:1234", True),
+    ("127.0.0.1", (), "[::1]:8000", True),
+    ("127.0.0.1", (), "LOCALHOST", True),
+    ("127.0.0.1", (), "evil.example:8000", False),  # a rebound name: the attack
+    ("127.0.0.1", (), "localhost.evil.example", False),
+    ("127.0.0.1", (), "192.168.1.5:8000", False),
+    ("192.168.1.5", (), "192.168.1.5:8000", True),  # --host names itself
+    ("::1", (), "[::1]", True),
+    ("0.0.0.0", (), "0.0.0.0:8000", False),  # every interface: no name of its own
+    ("0.0.0.0", ("box.lan", "192.168.1.5"), "box.lan:8000", True),
+    ("0.0.0.0", ("box.lan", "192.168.1.5"), "192.168.1.5", True),
+    ("0.0.0.0", ("*.lan",), "box.lan", True),
+    ("0.0.0.0", ("*",), "anything.example", True),
+])  # fmt: skip
+def test_a_foreign_host_is_refused(net: MotionDiffusion, bound: str, allowed: tuple, host: str, ok: bool) -> None:
+    """DNS rebinding: a page of evil.example whose name resolves to 127.0.0.1 reaches the server under
+    Host: evil.example; the server answers only its own names (400 with the app's JSON error otherwise),
+    and refuses before reading the body."""
+    app = make_app(net, ServeConfig(physics="none", seconds=2.0, host=bound, allowed_hosts=allowed, warmup=False))
+    with _client(app) as c:
+        res = c.get("/api/health", headers={"Host": host})
+        big = c.post("/api/generate", content=b"x" * 20_000, headers={"Host": host})
+    if ok:
+        assert res.status_code == 200 and res.json()["status"] == "ok", res.text
+        assert big.status_code == 413
+    else:
+        assert res.status_code == 400 and big.status_code == 400, res.text
+        error = res.json()["error"]
+        assert list(res.json()) == ["error"] and "\n" not in error
+        assert error.startswith(f"Host {host!r} is not a name of this server") and "--allow-host" in error
+
+
+def test_default_length_is_predicted_and_the_page_leaves_it_empty(net: MotionDiffusion) -> None:
+    """Without --seconds a request that gives none gets the length generate predicts from its text (as the
+    docs and the page's empty field say), and the page's field is empty; --seconds sets the default."""
+    from physmotion.generate import chosen_lengths
+
+    with _client(make_app(net, ServeConfig(physics="none", warmup=False))) as c:
+        got = c.post("/api/generate", json={"text": WALK}).json()
+        page = c.get("/").text
+    frames, source = chosen_lengths([WALK], GenerateConfig(seconds=None), net)[0]
+    assert (got["length_source"], got["frames"], source) == ("predicted", frames, "predicted")
+    assert re.search(r'<input id="seconds" type="number" step="0.5" value="" ', page)
+    with _client(make_app(net, ServeConfig(physics="none", seconds=3.0, warmup=False))) as c:
+        got = c.post("/api/generate", json={"text": WALK}).json()
+        assert (got["length_source"], got["frames"]) == ("given", 60)
+        assert re.search(r'<input id="seconds" type="number" step="0.5" value="3" ', c.get("/").text)
+        assert c.post("/api/generate", json={"text": WALK, "seconds": None}).json()["length_source"] == "predicted"
+    with pytest.raises(PhysmotionError, match="seconds must be between 2 and 9.8"):
+        make_app(net, ServeConfig(seconds=30.0, warmup=False))
+
+
 # ------------------------------------------------------------------------------------------------
-# Slow tier: a real server
+# A real server: uvicorn in a thread of this process, or the command in its own process
 
 
 class _ThreadServer:
@@ -213,6 +321,89 @@ class _ThreadServer:
         self.server.should_exit = True
         self.thread.join(10)
         self.sock.close()
+
+
+def _health(srv: _ThreadServer) -> dict:
+    with urllib.request.urlopen(srv.url + "api/health", timeout=10) as res:
+        return json.loads(res.read())
+
+
+def _until(check: Callable[[], bool], what: str, timeout: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not check():
+        assert time.monotonic() < deadline, f"timed out waiting for {what}"
+        time.sleep(0.05)
+
+
+def _raw_post(srv: _ThreadServer, body: bytes, head: str = "Content-Length: {n}") -> socket.socket:
+    """A socket that sent POST /api/generate with ``body`` (and head's framing header) and awaits the answer."""
+    sock = socket.create_connection(srv.sock.getsockname()[:2], timeout=10)
+    sock.sendall(f"POST /api/generate HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\n"
+                 f"{head.format(n=len(body))}\r\n\r\n".encode() + body)  # fmt: skip
+    return sock
+
+
+def test_a_request_whose_client_went_away_frees_its_place(net: MotionDiffusion, monkeypatch) -> None:
+    """Real uvicorn, real sockets closed by the client. One motion is made at a time and 1 may wait: a
+    waiting request whose client goes away is dropped unmade, and a running one gives its place up at once
+    (stopped at its next sampling step), so two new requests are taken instead of refused with 503."""
+    import physmotion.generate as gen_module
+
+    real, gate, made, stopped = gen_module.generate, threading.Event(), [], []
+
+    def gated(texts, config, model, **kwargs):  # the worker thread holds each motion until the gate opens
+        made.append(config.seed)
+        assert gate.wait(60)
+        try:
+            return real(texts, config, model, **kwargs)
+        except Exception as exc:
+            stopped.append((config.seed, type(exc).__name__))
+            raise
+
+    monkeypatch.setattr(gen_module, "generate", gated)
+    lines: list[str] = []
+    app = make_app(net, ServeConfig(physics="none", seconds=2.0, waiting=1, warmup=False), log=lines.append)
+    gone = lambda how: any(f"the client went away; {how}" in line for line in lines)  # noqa: E731
+    body = lambda seed: json.dumps({"text": WALK, "seed": seed}).encode()  # noqa: E731
+    with _ThreadServer(app) as srv, ThreadPoolExecutor(4) as pool:
+        a = _raw_post(srv, body(1))
+        _until(lambda: made == [1], "A to start")
+        b = _raw_post(srv, body(2))
+        _until(lambda: _health(srv) == {"status": "ok", "model": "in-process", "busy": True, "waiting": 1}, "B")
+        assert _post(srv.url + "api/generate", {"text": WALK, "seed": 9}) == 503  # the 2 places are taken
+        b.close()  # B's client goes away while B waits
+        _until(lambda: _health(srv)["waiting"] == 0, "B's place to be freed", timeout=3)
+        assert gone("dropped before it started")
+        a.close()  # A's client goes away while A runs (held at the gate)
+        _until(lambda: gone("stopped at its next step"), "A to be abandoned", timeout=3)
+        assert _health(srv) == {"status": "ok", "model": "in-process", "busy": True, "waiting": 0}
+        c = pool.submit(_post, srv.url + "api/generate", {"text": WALK, "seed": 3})
+        _until(lambda: _health(srv)["waiting"] == 1, "C to wait")
+        d = pool.submit(_post, srv.url + "api/generate", {"text": WALK, "seed": 4})
+        _until(lambda: _health(srv)["waiting"] == 2, "D to wait: A holds no place", timeout=3)
+        assert _post(srv.url + "api/generate", {"text": WALK, "seed": 9}) == 503  # C and D hold the 2
+        gate.set()
+        assert (c.result(60), d.result(60)) == (200, 200)
+    assert made == [1, 3, 4]  # B was never made
+    assert stopped == [(1, "_Abandoned")]  # A stopped at its first step
+
+
+def test_a_chunked_body_is_refused_as_it_passes_the_limit(net: MotionDiffusion) -> None:
+    """A chunked body has no Content-Length: the server counts it as it comes and answers 413 once it
+    passes the limit, without waiting for the rest (the body's last chunk is never sent here)."""
+    with _ThreadServer(make_app(net, ServeConfig(physics="none", seconds=2.0, warmup=False))) as srv:
+        chunks = b"".join(b"1000\r\n" + b"x" * 4096 + b"\r\n" for _ in range(5))  # 20 KiB, hex sizes
+        sock = _raw_post(srv, chunks, head="Transfer-Encoding: chunked")
+        answer = b""
+        while b"}" not in answer:
+            part = sock.recv(4096)
+            assert part, answer
+            answer += part
+        sock.close()
+    head, _, payload = answer.partition(b"\r\n\r\n")
+    assert head.startswith(b"HTTP/1.1 413 "), head
+    assert json.loads(payload) == {"error": "the request body is over the limit; this server takes at most "
+                                            "16384 bytes (a prompt of at most a few hundred characters)"}  # fmt: skip
 
 
 def _shot_pixels(png: bytes) -> np.ndarray:
@@ -282,6 +473,35 @@ def test_page_end_to_end_in_headless_chromium(net: MotionDiffusion, capsys: pyte
         browser.close()
     assert outside == []  # nothing but the local server was asked for
     assert not [m for m in messages if not m.startswith("error: Failed to load resource")], messages
+
+
+@pytest.mark.slow  # headless Chromium (installed by `make test`)
+def test_a_cjk_prompt_downloads_in_headless_chromium(net: MotionDiffusion, tmp_path: Path) -> None:
+    """The page's .npz link of a CJK prompt saves the file under its UTF-8 name in a real browser (the name
+    in the header used to break the download with a 500)."""
+    from playwright.sync_api import sync_playwright  # the dev extra's
+
+    if not Path(CHROMIUM).exists():
+        pytest.fail("chromium is not installed: `make browser` installs it")
+    text = "一个人向前走"
+    with _ThreadServer(make_app(net, ServeConfig(physics="none", warmup=False))) as srv, sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_FLAGS)
+        page = browser.new_page(accept_downloads=True)
+        page.goto(srv.url)
+        assert page.input_value("#seconds") == ""  # the length is predicted unless the user gives one
+        page.fill("#text", text)
+        page.fill("#seconds", "2")
+        page.click("#generate")
+        page.wait_for_selector('#info[data-state="shown"][data-id="m1"]', timeout=60_000)
+        with page.expect_download(timeout=30_000) as download:
+            page.click("#info a:text('download .npz')")
+        assert download.value.failure() is None
+        assert download.value.suggested_filename == f"{text}_s0_m1.npz"
+        saved = tmp_path / download.value.suggested_filename
+        download.value.save_as(saved)
+        browser.close()
+    motion = Motion.load(saved)
+    assert motion.texts == [text] and motion.num_frames == 40
 
 
 def _rss_kib(pid: int) -> int:
