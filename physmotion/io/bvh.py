@@ -258,7 +258,9 @@ def write_bvh(
     whose translation changes over time, also gets ``Xposition Yposition Zposition`` first. Nodes
     flagged ``is_end`` become End Sites; other leaves get an End Site at ``end_offsets[name]``
     (default: half the leaf's own offset, so viewers draw a bone). Values are written in the rig's
-    units; the root's OFFSET is its frame-0 position.
+    units. The root's OFFSET is 0 0 0 and its position channels hold its absolute position: importers
+    that let the channels replace the OFFSET (Blender's ``import_bvh``, ours) and those that add the
+    two read the same motion (CMU's cgspeed BVH files write the root the same way).
     """
     order = order.upper()
     if sorted(order) != ["X", "Y", "Z"]:
@@ -280,7 +282,7 @@ def write_bvh(
 
     def emit(j: int, depth: int) -> None:
         pad = "\t" * depth
-        off = rig.translations[0, j]
+        off = np.zeros(3) if depth == 0 else rig.translations[0, j]
         if rig.is_end[j]:
             lines.extend([f"{pad}End Site", f"{pad}{{", f"{pad}\tOFFSET {_fmt3(off, fmt)}", f"{pad}}}"])
             return

@@ -18,6 +18,9 @@ Steps, in order, and why in that order:
    (:func:`skeleton.facing_direction`; its left is then +X), and the stance soles over the whole clip
    on y = 0, the physical metrics' floor (:func:`physmotion.io.floor.ground`; frame 0's lowest foot
    joint, the rule before, left captured clips 2-3 cm in the floor and moved exported motions).
+   A rig whose files are already placed (:attr:`RigTable.placed`: our own BVH export) keeps the
+   file's position and facing: re-estimating the facing turned a generated motion by 1-5 degrees and
+   re-grounding moved it 3-15 mm (docs/decisions/data.md "import floor").
 """
 
 from __future__ import annotations
@@ -100,7 +103,8 @@ def canonicalize(
 
     rig: in file units and axes; fps: its true frame rate; units: metres per file unit;
     up_axis: the file's world up axis ("X", "Y" or "Z"); floor: :data:`~physmotion.io.floor.STANCE`
-    (the stance soles on y = 0) or :data:`~physmotion.io.floor.FRAME0` (the rule before, for P's input).
+    (the stance soles on y = 0) or :data:`~physmotion.io.floor.FRAME0` (the rule before, for P's input);
+    neither applies to a ``table.placed`` rig, whose files keep their placement.
     """
     if up_axis not in _TO_Y_UP:
         raise PhysmotionError(f"up axis must be one of X, Y, Z, got {up_axis!r}")
@@ -133,10 +137,13 @@ def canonicalize(
     rotations, root = inverse_kinematics(rigid, offsets)
     joints = forward_kinematics(rotations, root, offsets)
     misfit = np.linalg.norm(joints - raw, axis=-1)
-    joints, rotations = _place(joints, rotations, frame0_floor=floor == FRAME0)
-    if floor == FRAME0:
-        grounding = Grounding(0.0, 0.0, 0.0, False)
+    if table.placed:  # our own export: already placed and on the floor; placing again would move it
+        grounding = Grounding(0.0, 0.0, 0.0, 0.0)
+    elif floor == FRAME0:
+        joints, rotations = _place(joints, rotations, frame0_floor=True)
+        grounding = Grounding(0.0, 0.0, 0.0, 0.0)
     else:
+        joints, rotations = _place(joints, rotations)
         joints, grounding = ground(joints, FPS)  # a vertical shift: rotations and offsets keep
     return Canonical(
         joints, rotations, offsets, bool(dropped), misfit.mean(axis=0), misfit.max(axis=0), grounding

@@ -1,24 +1,24 @@
-"""Where an imported motion meets the floor: its stance soles on y = 0, over the whole clip.
+"""Where an imported motion meets the floor: one constant vertical shift, chosen where the body stands.
 
 The physical metrics put the floor where the body *surface* stands (:data:`~physmotion.conventions.
 FLOOR_SURFACE`, :mod:`physmotion.metrics.physical`), measured on the humanoid's collision geometry posed
-on the joints (:class:`~physmotion.physics.surface.HumanoidSurface`, what ``physmotion metrics`` uses).
-The importer grounds a motion in that same convention, by one constant vertical shift:
+on the joints (:class:`~physmotion.physics.surface.HumanoidSurface`, what ``physmotion metrics`` uses,
+with a flat hand). The importer grounds a motion in that same convention:
 
-1. stance frames: frames where some foot joint (ankle or toe) is slower than :data:`STANCE_SPEED` and
-   within :data:`STANCE_BAND` of the frame's lowest foot joint (a planted foot, not a foot held still in
-   the air);
-2. floor: the median, over the stance frames, of the body's lowest surface point, so the stance soles
-   stand on y = 0 (a median, because box feet dip a corner under the flat stance at heel strike and
-   toe-off, and capture has outliers); a clip with no stance frame (a hop cut from take-off to landing)
-   puts its lowest point over the clip on the floor;
-3. cap: where that leaves the metrics' Penetrate above :data:`PENETRATE_CAP` (uneven ground in the
-   capture, a body lying lower than its feet stood, the humanoid's capsules thicker than the actor),
-   the motion is raised just enough to bring it down to the cap.
+1. contact frames: frames where a foot stands (some foot joint, ankle or toe, slower than
+   :data:`STANCE_SPEED` and within :data:`STANCE_BAND` of the frame's lowest foot joint: a planted
+   foot, not a foot held still in the air), or a hand does (its wrist slower than
+   :data:`STANCE_SPEED` and the hand within :data:`STANCE_BAND` of the body's lowest point);
+2. floor: the height f that minimises Penetrate + Float as the metrics define them (5 mm tolerance),
+   Penetrate over every frame and Float over the contact frames only: a frame in the air may float, no
+   frame may be in the floor. The sum is convex and piecewise linear in f; f is the middle of its
+   minimisers (:func:`best_floor`, exact). A clip with no contact frame (a hop cut from take-off to
+   landing) puts its lowest point over the clip on the floor.
 
-Every step moves with the motion (percentiles of heights, speeds), so grounding a grounded motion
-changes nothing: an export -> import round trip returns the motion where it was (docs/decisions/data.md
-"import floor").
+Hands count only in the frames where they touch the floor; a low hand elsewhere weighs like any
+frame's lowest point, in Penetrate only. Every step moves with the motion (speeds, heights relative to
+the frame), so grounding a grounded motion changes nothing. History (the earlier cap on Penetrate,
+which made clips with one low frame float): docs/decisions/data.md "import floor".
 """
 
 from __future__ import annotations
@@ -35,12 +35,10 @@ STANCE_SPEED: float = 0.15
 """m/s: a foot joint slower than this (to both neighbouring frames) may be planted."""
 STANCE_BAND: float = 0.03
 """m: ... if it is within this of the frame's lowest foot joint (the other foot may be lifted)."""
-PENETRATE_CAP: float = 1.5
-"""mm: most Penetrate (the metrics' measure, 5 mm tolerance) an imported motion keeps."""
-_TOLERANCE = 0.005  # m: the metrics' Penetrate tolerance (MetricParams.tolerance)
+_TOLERANCE = 0.005  # m: the metrics' Penetrate and Float tolerance (MetricParams.tolerance)
 
 STANCE: str = "stance"
-"""The import floor: the stance soles over the whole clip on y = 0 (this module)."""
+"""The import floor: least Penetrate + Float over the contact frames (this module)."""
 FRAME0: str = "frame0"
 """The earlier import floor (docs/decisions/data.md: "import floor"): frame 0's lowest foot joint on
 y = 0. Close to the data convention that the physics projection P takes as input
@@ -50,26 +48,58 @@ IMPORT_FLOORS: tuple[str, ...] = (STANCE, FRAME0)
 
 @dataclass(frozen=True)
 class Grounding:
-    """What grounding did: ``lift`` metres added to y (the stance rule, then the cap), the stance
-    rule's floor ``stance_floor`` (m, before the shift), the share of stance frames, and whether the
-    Penetrate cap raised the motion (``capped``)."""
+    """What grounding did: ``lift`` metres added to y; the floor ``stance_floor`` it chose (m, before the
+    shift: ``-lift``); the share of contact frames, and of them those where only a hand touches."""
 
     lift: float
     stance_floor: float
     stance_share: float
-    capped: bool
+    hand_share: float
 
 
 def stance_frames(joints: np.ndarray, fps: float = FPS) -> np.ndarray:
     """(T,) bool: frames where some foot joint is planted (see the module docstring)."""
     feet = np.asarray(joints, dtype=np.float64)[:, list(FOOT_JOINTS)]  # (T, 4, 3)
-    speed = np.linalg.norm(np.diff(feet, axis=0), axis=-1) * fps  # (T-1, 4)
-    slow = np.ones(feet.shape[:2], dtype=bool)
-    slow[:-1] &= speed < STANCE_SPEED
-    slow[1:] &= speed < STANCE_SPEED
     height = feet[..., UP_AXIS]
     low = height <= height.min(axis=-1, keepdims=True) + STANCE_BAND
-    return (slow & low).any(axis=-1)
+    return (_slow(feet, fps) & low).any(axis=-1)
+
+
+def hand_frames(joints: np.ndarray, hands: np.ndarray, lowest: np.ndarray, fps: float = FPS) -> np.ndarray:
+    """(T,) bool: frames where a hand rests on the floor: its wrist slower than :data:`STANCE_SPEED` and
+    the hand (heights ``hands`` (T, 2)) within :data:`STANCE_BAND` of the body's lowest point ``lowest`` (T,)."""
+    from physmotion.physics.surface import HAND_JOINTS
+
+    wrists = np.asarray(joints, dtype=np.float64)[:, list(HAND_JOINTS)]  # (T, 2, 3)
+    return (_slow(wrists, fps) & (hands <= lowest[:, None] + STANCE_BAND)).any(axis=-1)
+
+
+def _slow(points: np.ndarray, fps: float) -> np.ndarray:
+    """(T, K) bool: points (T, K, 3) slower than STANCE_SPEED to both neighbouring frames."""
+    speed = np.linalg.norm(np.diff(points, axis=0), axis=-1) * fps  # (T-1, K)
+    slow = np.ones(points.shape[:2], dtype=bool)
+    slow[:-1] &= speed < STANCE_SPEED
+    slow[1:] &= speed < STANCE_SPEED
+    return slow
+
+
+def best_floor(lowest: np.ndarray, contact: np.ndarray) -> float:
+    """The floor f (m) with the least Penetrate (every frame) + Float (contact frames), exactly.
+
+    lowest: (T,) the body's lowest surface point per frame; contact: (T,) bool, not all False.
+    Penetrate grows by 1/T per frame with lowest < f - tol and Float falls by 1/T per contact frame with
+    lowest > f + tol: the sum is convex, its slope steps at those breakpoints; the answer is the middle
+    of the interval where the slope changes sign (so a constant shift of ``lowest`` shifts f alike).
+    """
+    low = np.asarray(lowest, dtype=np.float64)
+    under = np.sort(low + _TOLERANCE)  # f beyond these: that frame penetrates
+    over = np.sort(low[contact] - _TOLERANCE)  # f below these: that contact frame floats
+    points = np.concatenate([under, over])
+    right = np.searchsorted(under, points, "right") - (len(over) - np.searchsorted(over, points, "right"))
+    left = np.searchsorted(under, points, "left") - (len(over) - np.searchsorted(over, points, "left"))
+    lo = points[right >= 0].min()  # the lowest minimiser: the first breakpoint the slope leaves <= 0 at
+    hi = points[left <= 0].max()  # the highest: the last the slope reaches >= 0 at
+    return float(0.5 * (lo + hi))
 
 
 def ground(joints: np.ndarray, fps: float = FPS) -> tuple[np.ndarray, Grounding]:
@@ -79,26 +109,12 @@ def ground(joints: np.ndarray, fps: float = FPS) -> tuple[np.ndarray, Grounding]
     x = np.asarray(joints, dtype=np.float64)
     if x.ndim != 3 or x.shape[1:] != (NUM_JOINTS, 3) or len(x) == 0:
         raise ShapeError(f"joints must be (T, 22, 3), got {x.shape}")
-    lowest = HumanoidSurface().lowest_height(x)  # (T,) the body's lowest surface point
-    stance = stance_frames(x, fps)
-    floor = float(np.median(lowest[stance]) if stance.any() else lowest.min())  # no stance: all in motion
-    capped_floor = _highest_floor(lowest, PENETRATE_CAP / 1000.0)
-    capped = capped_floor < floor
-    lift = -min(floor, capped_floor)
+    surface = HumanoidSurface()
+    lowest = surface.lowest_height(x)  # (T,) the body's lowest surface point
+    feet = stance_frames(x, fps)
+    hands = hand_frames(x, surface.hand_heights(x), lowest, fps)
+    contact = feet | hands
+    floor = best_floor(lowest, contact) if contact.any() else float(lowest.min())  # no contact: all in motion
     out = x.copy()
-    out[..., UP_AXIS] += lift
-    return out, Grounding(lift, floor, float(stance.mean()), bool(capped))
-
-
-def _highest_floor(lowest: np.ndarray, cap: float) -> float:
-    """The highest floor f with mean(max(0, f - tol - lowest)) <= cap (the metrics' Penetrate), exactly.
-
-    The mean is piecewise linear and increasing in f: with the heights sorted, on the piece where the
-    k lowest frames are under f - tol it is (k (f - tol) - sum of those k) / T.
-    """
-    a = np.sort(np.asarray(lowest, dtype=np.float64))
-    n = len(a)
-    g = (cap * n + np.cumsum(a)) / np.arange(1, n + 1)  # f - tol where the mean over the k lowest is the cap
-    fits = np.append(g[:-1] <= a[1:], True)  # ... on its own piece (the first such k is the answer)
-    return float(g[np.argmax(fits)] + _TOLERANCE)
-
+    out[..., UP_AXIS] -= floor
+    return out, Grounding(-floor, floor, float(contact.mean()), float((hands & ~feet).mean()))

@@ -115,7 +115,8 @@ def import_clip(
     """Import a manifest clip, or a bare BVH / AMC file, as a canonical :class:`Motion`.
 
     Motion: joints (T, 22, 3) float32 at 20 fps, metres, Y up, the stance soles on the floor y = 0
-    (:mod:`physmotion.io.floor`), root over the origin and facing +Z at frame 0;
+    (:mod:`physmotion.io.floor`), root over the origin and facing +Z at frame 0 (our own BVH export,
+    rig ``smpl22``, keeps the placement it was written with: the round trip returns the motion);
     rotations and offsets from the 22-joint IK (FK of them gives ``joints``); texts, licence_tag
     and source (clip id) from the manifest. Each setting comes from the first of these that has it:
     units: the argument, the rig table, the ASF file, the manifest; up axis: the argument, the rig

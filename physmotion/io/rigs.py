@@ -147,6 +147,9 @@ class RigTable:
     up_axis: the world up axis of the file's *animated* frames ("X", "Y" or "Z"), or None to take
     it from the manifest or the caller (default Y).
     source: where the convention comes from (a few words, for ``physmotion import --rig list``).
+    placed: the rig's files are already in the project's placement (our own export: metres, Y up, on
+    the floor y = 0), so an import keeps their position and facing instead of placing and grounding
+    them again: an export -> import round trip then returns the motion where it was.
     """
 
     name: str
@@ -155,6 +158,7 @@ class RigTable:
     up_axis: str | None = "Y"
     note: str = ""
     source: str = ""
+    placed: bool = False
 
     def __post_init__(self) -> None:
         missing = [j for j in JOINT_NAMES if j not in self.joints]
@@ -351,7 +355,7 @@ RIGS: Mapping[str, RigTable] = MappingProxyType(
             ),
             RigTable(
                 "smpl22", _SMPL22, units=1.0, up_axis="Y", note="our own BVH export (physmotion.io.export)",
-                source="physmotion's own BVH export (pelvis, left_hip, ...)",
+                source="physmotion's own BVH export (pelvis, left_hip, ...)", placed=True,
             ),
         )
     }

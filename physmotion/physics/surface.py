@@ -16,7 +16,11 @@ import numpy as np
 from physmotion.errors import ShapeError
 from physmotion.physics.humanoid import HumanoidConfig, body_from_joints, build_model
 from physmotion.physics.retarget import joints_to_qpos
-from physmotion.skeleton import FOOT_JOINTS, JOINT_NAMES, NUM_JOINTS
+from physmotion.skeleton import FOOT_JOINTS, JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
+
+
+HAND_JOINTS: tuple[int, int] = (JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"])
+"""The joints whose bodies carry the hands (the 22-joint skeleton has no hand joint)."""
 
 
 def lowest_point(model, data) -> float:
@@ -77,6 +81,14 @@ class HumanoidSurface:
     the estimate from the simulated joints can pitch the feet a few degrees off the humanoid's, which
     moved the soles by up to 10 mm against MuJoCo's (measured on generated motions).
     Foot patches: the ankle box (heel) and the toe box.
+
+    Hands: the simulated humanoid has no wrist joint, so its hand box runs on along the forearm to
+    0.19 m past the wrist (PHC's hand; fingertips of a hand held straight). A pose read from joints
+    says nothing of the wrist's bend, and a hand resting flat on the floor bends it ~90 degrees: the
+    palm lies about its half thickness under the wrist joint, while the rigid box pointed 19 cm into the
+    floor and lifted hand-supported clips (cartwheels, get-ups) 10-20 cm at import. Here each hand's
+    lowest point is the wrist joint less the hand box's half thickness (a flat hand, fingertips on the
+    palm's level); the simulated humanoid keeps PHC's box (docs/decisions/data.md "import floor").
     """
 
     def __init__(
@@ -94,9 +106,9 @@ class HumanoidSurface:
         self.offsets, self.config = offsets, config or HumanoidConfig()
         self._cache: tuple[object, tuple[np.ndarray, np.ndarray]] | None = None
 
-    def _per_frame(self, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(lowest (..., T), feet (..., T, 4)) heights in metres; the metrics ask for both of the same
-        array in turn, so the last result is kept."""
+    def _per_frame(self, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(lowest (..., T), feet (..., T, 4), hands (..., T, 2)) heights in metres; the metrics ask for
+        more than one of the same array in turn, so the last result is kept."""
         # Keyed on the array object itself, held here: an id() alone can be reused by the next array
         # once the first is freed, and would then return another motion's heights.
         if self._cache is not None and self._cache[0] is joints:
@@ -106,15 +118,21 @@ class HumanoidSurface:
         flat = x.reshape((-1,) + x.shape[-3:])
         lowest = np.zeros(flat.shape[:2])
         feet = np.zeros(flat.shape[:2] + (4,))
+        hands = np.zeros(flat.shape[:2] + (2,))
         for b, motion in enumerate(flat):
             offsets = self._body(b, len(flat))
             offsets = body_from_joints(motion) if offsets is None else offsets
             model = build_model(offsets, self.config)
             patch = np.array([model.geom(JOINT_NAMES[j]).id for j in FOOT_JOINTS])
-            _, gpos, gmat = pose_frames(model, joints_to_qpos(motion, model, config=self.config))
-            lowest[b] = body_lowest(model, gpos, gmat)
+            hand = np.array([model.geom(JOINT_NAMES[j]).id for j in HAND_JOINTS])
+            others = np.setdiff1d(np.arange(1, model.ngeom), hand)  # every geom but the floor and hands
+            xpos, gpos, gmat = pose_frames(model, joints_to_qpos(motion, model, config=self.config))
+            wrist = np.array([model.body(JOINT_NAMES[j]).id for j in HAND_JOINTS])
+            hands[b] = xpos[:, wrist, 2] - model.geom_size[hand, 1]  # flat hand: wrist less half thickness
+            lowest[b] = np.minimum(lowest_of(model, gpos, gmat, others).min(axis=-1), hands[b].min(axis=-1))
             feet[b] = lowest_of(model, gpos, gmat, patch)
-        result = lowest.reshape(x.shape[:-2]), feet.reshape(x.shape[:-2] + (4,))
+        result = (lowest.reshape(x.shape[:-2]), feet.reshape(x.shape[:-2] + (4,)),
+                  hands.reshape(x.shape[:-2] + (2,)))  # fmt: skip
         self._cache = (joints, result)
         return result
 
@@ -132,6 +150,10 @@ class HumanoidSurface:
 
     def foot_heights(self, joints: np.ndarray) -> np.ndarray:
         return self._per_frame(joints)[1]
+
+    def hand_heights(self, joints: np.ndarray) -> np.ndarray:
+        """(..., T, 2) lowest point of the left and right hand (a flat hand: see the class docstring)."""
+        return self._per_frame(joints)[2]
 
 
 _GROUNDING_PERCENTILES = np.arange(0, 55, 5)  # candidate floors: percentiles of the per-frame lowest point

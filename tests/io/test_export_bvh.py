@@ -66,3 +66,18 @@ def test_failed_write_leaves_nothing(clip, tmp_path: Path, monkeypatch: pytest.M
     with pytest.raises(OSError):
         save_bvh(motion, tmp_path / "x.bvh")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_placed_motion_round_trips_where_it_is(clip, tmp_path: Path) -> None:
+    """A real motion not at the import's placement (as P's output: turned 5 degrees, off the origin,
+    12 mm up) comes back from our BVH where it was, within 1 mm mean and max (before: the importer turned
+    it to face +Z, moved it to the origin and re-grounded it); the root OFFSET is 0, so importers that
+    add it to the root's position channels read the same motion."""
+    motion = import_clip(clip("cmu_02_06"))
+    turn = np.array([[np.cos(0.09), 0.0, np.sin(0.09)], [0.0, 1.0, 0.0], [-np.sin(0.09), 0.0, np.cos(0.09)]])
+    moved = Motion(joints=motion.joints.astype(np.float64) @ turn.T + [0.4, 0.012, -0.7], fps=motion.fps)
+    path = tmp_path / "m.bvh"
+    save_bvh(moved, path)
+    assert path.read_text().splitlines()[3].split() == ["OFFSET", "0.000000", "0.000000", "0.000000"]
+    error = np.linalg.norm(import_clip(path).joints - moved.joints, axis=-1)
+    assert error.mean() < 1e-3 and error.max() < 1e-3, f"{error.mean() * 1000:.2f} / {error.max() * 1000:.2f} mm"
