@@ -6,15 +6,18 @@ Any :class:`~physmotion.errors.PhysmotionError` becomes one line on stderr and e
 from __future__ import annotations
 
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from physmotion.conventions import FLOOR_JOINTS, FLOOR_SURFACE, FPS, MAX_FRAMES, MAX_TEXT_TOKENS, MIN_FRAMES
 from physmotion.errors import PhysmotionError, PhysmotionWarning
-from physmotion.paths import DEFAULT_MODEL, WEIGHTS_DIR
+from physmotion.paths import DEFAULT_MODEL, MOTION_SUFFIXES, WEIGHTS_DIR
 
 # The rig tables' names for `import --rig`'s help (physmotion.io.rigs.RIGS, which imports scipy: not
 # imported for --help; tests/test_cli_cold.py checks the two agree).
@@ -34,12 +37,19 @@ app = typer.Typer(
 data_app = typer.Typer(help="Build and inspect HumanML3D-layout datasets.", no_args_is_help=True,
                        context_settings=HELP)  # fmt: skip
 app.add_typer(data_app, name="data")
-console = Console(soft_wrap=True)
+# User text (captions, paths, physics modes) goes into these lines: rich must neither turn ":end:" or
+# ":fire:" into emoji nor read "[...]" as markup (rich docs, Console: emoji=, markup=). A line that wants
+# markup asks for it (markup=True) and escapes the user's text in it (rich.markup.escape).
+console = Console(soft_wrap=True, emoji=False, markup=False, highlight=False)
 OVERWRITE_HELP = "Replace existing output instead of refusing."
 SAMPLER_HELP = ("ddim, ddpm, dpmpp (DPM-Solver++ 2M, Karras) or dpmpp-sde (its SDE variant; a BioMoDiffuse "
                 "model's default, with 10 steps) (default: dpmpp).")
 ETA_HELP = "DDIM eta: 0 deterministic, 1 ancestral (DDPM-like) (default: 0)."
-CFG_HELP = "Classifier-free guidance scale (default: 2.5)."
+CFG_HELP = ("Classifier-free guidance scale, 0 to 10: 0 ignores the text, 1 follows it plainly, more follows it "
+            "harder (MDM's 2.5) (default: 2.5).")
+# SamplerConfig's fields as the options that set them, for its errors (_as_options).
+SAMPLER_OPTIONS = {"steps": "--steps", "eta": "--eta", "cfg_scale": "--cfg-scale", "phys_scale": "--phys-scale",
+                   "speed": "--speed"}  # fmt: skip
 
 
 def _version(value: bool) -> None:
@@ -58,14 +68,29 @@ def _root(
     """Text-to-motion generation that obeys physics."""
 
 
-def _check_out(out: Path, overwrite: bool | None = None) -> None:
-    """Refuse, before any work, an output file that exists (unless ``overwrite``) or cannot be written.
+def _check_out(out: Path, overwrite: bool | None = None, suffixes: tuple[str, ...] | None = None) -> None:
+    """Refuse, before any work, an output file that exists (unless ``overwrite``), cannot be written, or
+    (where ``suffixes`` are given) is of a format the command cannot write.
 
     overwrite None: the command has no --overwrite, so the message does not offer one."""
     from physmotion.paths import check_output
 
     hint = "delete it or choose another -o" if overwrite is None else "pass --overwrite to replace it"
-    check_output(out, "file", overwrite=bool(overwrite), hint=hint)
+    check_output(out, "file", overwrite=bool(overwrite), hint=hint, suffixes=suffixes)
+
+
+@contextmanager
+def _as_options(**options: str) -> Iterator[None]:
+    """Errors of the library's config checks name a field (``ilc_passes must be ...``); on the command line
+    they name the option the user typed (``--ilc must be ...``). ``options`` maps field to option."""
+    try:
+        yield
+    except PhysmotionError as exc:
+        message = str(exc)
+        for name, option in options.items():
+            if message.startswith(f"{name} "):
+                raise PhysmotionError(option + message[len(name):]) from None
+        raise
 
 
 def _warn(message: str) -> None:
@@ -124,7 +149,7 @@ def data_build(
                          features=features, pad_short=pad_short)
     report = build_dataset(source, out, config, progress=sys.stderr.isatty())
     for clip, reason in sorted(report.skipped.items()):
-        console.print(f"[yellow]skipped[/] {clip}: {reason}", highlight=False)
+        console.print(f"[yellow]skipped[/] {escape(clip)}: {escape(reason)}", markup=True)
     items = ", ".join(f"{k} {v}" for k, v in report.num_items.items())
     console.print(
         f"built {out}: {report.num_clips - len(report.skipped)}/{report.num_clips} clips, "
@@ -205,7 +230,7 @@ def import_motion(
         return
     if path is None or out is None:
         raise PhysmotionError("import needs a FILE and -o OUT (or --rig list to see the rig tables)")
-    _check_out(out, overwrite)
+    _check_out(out, overwrite, MOTION_SUFFIXES)
     from physmotion.io.export import save_motion
     from physmotion.io.importer import import_clip
 
@@ -224,8 +249,7 @@ def export_motion(
     from physmotion.io.export import save_motion
     from physmotion.motion import Motion
 
-    _check_out(out, overwrite)
-
+    _check_out(out, overwrite, MOTION_SUFFIXES)
     save_motion(Motion.load(path), out)
     console.print(f"wrote {out}", highlight=False)
 
@@ -246,7 +270,8 @@ def _opt_str(path: Path | None) -> str | None:
 @app.command("project")
 def project_motion(
     paths: list[Path] = typer.Argument(..., help="Motion .npz files (joints at any fps)."),
-    out: Path = typer.Option(..., "-o", "--out", help="Output .npz with the projected motion; with several "
+    out: Path = typer.Option(..., "-o", "--out", help="Output .npz with the projected motion (or .bvh: the motion "
+                             "alone, without the simulation's records, as `export` writes); with several "
                              "inputs, a folder that receives <stem>.npz per input (those already there are "
                              "skipped, so an interrupted run resumes)."),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
@@ -283,11 +308,12 @@ def project_motion(
     if teacher and controller != "search":
         raise PhysmotionError("--teacher needs --controller search: only the search makes teacher records")
     search = search_effort(effort, seed) if controller == "search" else None
-    config = preset(preset_name).with_controller(controller, _opt_str(policy), search)
-    config = replace(config, ilc_passes=ilc) if ilc else config
+    with _as_options(ilc_passes="--ilc", controller="--controller"):
+        config = preset(preset_name).with_controller(controller, _opt_str(policy), search)
+        config = replace(config, ilc_passes=ilc) if ilc else config
     config = config.at_fine_step() if fine_step else config
     if len(paths) == 1 and ray is None:
-        _check_out(out, overwrite)
+        _check_out(out, overwrite, MOTION_SUFFIXES)  # written by suffix, as `export` writes
         if teacher:
             _check_out(teacher_path(out), overwrite)
         with _step_bar(f"projecting {paths[0].name} ({controller}), control steps") as tick:
@@ -299,6 +325,9 @@ def project_motion(
         raise PhysmotionError(f"{missing[0]}: no such file")
     if out.exists() and not out.is_dir():
         raise PhysmotionError(f"{out} is a file: with several inputs, -o names a folder")
+    from physmotion.paths import check_output
+
+    check_output(out, "folder", overwrite=True)  # its files are checked one by one: an earlier run resumes
     if overwrite:  # re-project everything: the outputs of an earlier run are not skipped
         from physmotion.physics.files import outputs_for
 
@@ -379,7 +408,7 @@ def metrics(
     if fmt is None:
         table, legend = fit_table(results, f"physical metrics ({surface} surface)", console.width)
         # A table that still does not fit prints whole (wider than the terminal) rather than with cut cells.
-        Console(width=max(console.width, table_width(table))).print(table)
+        Console(width=max(console.width, table_width(table)), emoji=False, markup=False).print(table)
         for line in legend:
             console.print(line, highlight=False, markup=False)
         return
@@ -395,7 +424,7 @@ def metrics(
 @app.command("refine")
 def refine_cmd(
     path: Path = typer.Argument(..., help="A motion .npz or .bvh (e.g. a pose estimator's output)."),
-    out: Path = typer.Option(..., "-o", "--out", help="Output motion .npz (20 fps)."),
+    out: Path = typer.Option(..., "-o", "--out", help="Output motion .npz or .bvh (20 fps)."),
     strength: float = typer.Option(0.3, help="Share of the diffusion steps to invert, in [0, 1] (0 returns "
                                    "the input on the dataset's skeleton)."),
     text: str = typer.Option("", help="Caption to condition on (default: none)."),
@@ -421,12 +450,14 @@ def refine_cmd(
 
     config = RefineConfig(strength=strength, steps=steps, text=text, phys_scale=phys_scale,
                           smooth_hz=smooth_hz or None, anchor_hz=anchor_hz or None)
-    config.check()
+    with _as_options(strength="--strength", steps="--steps", phys_scale="--phys-scale", smooth_hz="--smooth-hz",
+                     anchor_hz="--anchor-hz"):  # fmt: skip
+        config.check()
     if not path.is_file():
         raise PhysmotionError(f"{path}: no such file")
     if path.suffix.lower() not in (".npz", ".bvh"):
         raise PhysmotionError(f"{path}: refine reads .npz or .bvh")
-    _check_out(out, overwrite)
+    _check_out(out, overwrite, MOTION_SUFFIXES)
     if path.suffix.lower() == ".bvh":
         from physmotion.io.importer import import_clip
 
@@ -436,7 +467,9 @@ def refine_cmd(
     pipeline = RefinePipeline(MotionDiffusion.load(_model_dir(model_dir)), config)
     pipeline.check(motion)  # length and NaN before the work
     refined = pipeline(motion).motion
-    refined.save(out)
+    from physmotion.io.export import save_motion
+
+    save_motion(refined, out)
     console.print(f"wrote {out}: {len(refined.joints)} frames, strength {strength:g}", highlight=False)
 
 
@@ -450,7 +483,8 @@ def generate_cmd(
         "model folder with a vocabulary.txt, as the shipped model has)."),
     out: Path = typer.Option(Path("out"), "-o", "--out", help="Output folder: each motion becomes "
                              "<caption>_s<seed>_<k>.npz, .bvh and .gif (k: sample of that caption), and "
-                             "the run is appended to generate.json there."),
+                             "the run is appended to generate.json there. A new folder named like a file (foo.npz, foo.gif) is "
+                             "refused."),
     prompts: Path | None = typer.Option(
         None, "--prompts", help="A UTF-8 file of prompts, one a line, generated in one batch by one process: "
         "'a person jumps | 3.5' (or a tab before the number) gives that motion's seconds; blank lines and "
@@ -527,7 +561,8 @@ def generate_cmd(
     cfg.sampler = _with(default_sampler(net), sampler=sampler, steps=steps, eta=eta, cfg_scale=cfg_scale,
                         phys_scale=phys_scale, speed=speed)  # fmt: skip
     cfg.sampler.check_model(net)
-    check_request(texts, cfg, net)
+    with _as_options(**SAMPLER_OPTIONS):
+        check_request(texts, cfg, net)
     for text, tokens in long_prompts(texts, net).items():
         _warn(f"{_quote(text)} is {tokens} tokens long; the text encoder reads only the first "
               f"{MAX_TEXT_TOKENS}, the rest is ignored")  # fmt: skip
@@ -581,19 +616,13 @@ def _check_generate_early(texts, model, prompt_file, prompts, *, seconds, num, p
 
         if sampler not in SAMPLERS:
             raise PhysmotionError(f"unknown sampler {sampler!r}: choose one of {', '.join(SAMPLERS)}")
-    if steps is not None:
-        if not 1 <= steps <= 1000:
-            raise PhysmotionError(f"steps must be between 1 and 1000, got {steps}")
-        if mode is not None:
-            mode.hook_steps(steps)
-    if eta is not None and not 0.0 <= eta <= 1.0:
-        raise PhysmotionError(f"eta must be between 0 and 1, got {eta}")
-    if cfg_scale is not None and not math.isfinite(cfg_scale):
-        raise PhysmotionError(f"cfg_scale must be a finite number, got {cfg_scale}")
+    _check_sampler_options(steps=steps, eta=eta, cfg_scale=cfg_scale)
+    if steps is not None and mode is not None:
+        mode.hook_steps(steps)
     if phys_scale is not None and not (math.isfinite(phys_scale) and phys_scale >= 0):
-        raise PhysmotionError(f"phys_scale must be a number >= 0, got {phys_scale}")
+        raise PhysmotionError(f"--phys-scale must be a number >= 0, got {phys_scale}")
     if speed is not None and not (math.isfinite(speed) and 0.0 < speed <= 4.0):
-        raise PhysmotionError(f"speed must be in (0, 4], got {speed}")
+        raise PhysmotionError(f"--speed must be in (0, 4], got {speed}")
     if num is not None and not 1 <= num <= 256:
         raise PhysmotionError(f"--num must be between 1 and 256, got {num}")
     try:
@@ -611,6 +640,23 @@ def _check_generate_early(texts, model, prompt_file, prompts, *, seconds, num, p
         check_seconds(prompt_file, lo, hi, str(prompts))
     if arch != "biomo" and (phys_scale is not None or (speed is not None and speed != 1.0)):
         raise PhysmotionError(f"--phys-scale and --speed need a BioMoDiffuse model (arch biomo); this one is a {arch}")
+
+
+def _check_sampler_options(*, steps: int | None, eta: float | None, cfg_scale: float | None) -> None:
+    """The sampler options of generate and evaluate, checked before torch loads, named as typed. The
+    same bounds as SamplerConfig.check, which runs again on the model's sampler."""
+    import math
+
+    from physmotion.conventions import CFG_SCALE_RANGE
+
+    if steps is not None and not 1 <= steps <= 1000:
+        raise PhysmotionError(f"--steps must be between 1 and 1000, got {steps}")
+    if eta is not None and not (math.isfinite(eta) and 0.0 <= eta <= 1.0):
+        raise PhysmotionError(f"--eta must be between 0 and 1, got {eta:g}")
+    lo, hi = CFG_SCALE_RANGE
+    if cfg_scale is not None and not (math.isfinite(cfg_scale) and lo <= cfg_scale <= hi):
+        raise PhysmotionError(f"--cfg-scale must be between {lo:g} and {hi:g} (MDM's default: 2.5), "
+                              f"got {cfg_scale:g}")  # fmt: skip
 
 
 def _quote(text: str, limit: int = 40) -> str:
@@ -640,8 +686,12 @@ def _step_bar(label: str):
 
     @contextmanager
     def bar():
-        progress = Progress(TextColumn(label), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                            TimeRemainingColumn(), console=Console(stderr=True), disable=not sys.stderr.isatty())
+        # The label (a file name) is the task's description, not the column's format string: a "{" in a
+        # path would break str.format, and "[..]" or ":fire:" would be read as markup or emoji.
+        progress = Progress(TextColumn("{task.description}", markup=False), BarColumn(), MofNCompleteColumn(),
+                            TimeElapsedColumn(), TimeRemainingColumn(),
+                            console=Console(stderr=True, emoji=False, markup=False),
+                            disable=not sys.stderr.isatty())  # fmt: skip
         with progress:
             task = progress.add_task(label, total=None)
             yield lambda done, total: progress.update(task, completed=done, total=total)
@@ -838,6 +888,7 @@ def evaluate_cmd(
 
     for written in table_paths(out):  # EvalTable.write's names
         _check_out(written, overwrite)
+    _check_sampler_options(steps=steps, eta=eta, cfg_scale=cfg_scale)  # before the model loads
     modes = tuple(str(m) for m in parse_modes(physics)) if physics is not None else None
     cfg = _with(EvaluateConfig.quick() if quick else EvaluateConfig(), modes=modes, split=split, seed=seed,
                 repeats=None if quick else repeats)
@@ -845,7 +896,7 @@ def evaluate_cmd(
     cfg.base.sampler = _with(default_sampler(net), steps=cfg.base.sampler.steps if quick else steps,
                              sampler=sampler, eta=eta, cfg_scale=cfg_scale)
     cfg.base = cfg.base.with_controller(controller, _opt_str(policy))
-    with _step_bar("evaluating") as tick:
+    with _step_bar("evaluating") as tick, _as_options(**SAMPLER_OPTIONS):
         table = evaluate(net, judge, data, cfg, on_progress=tick)
     paths = table.write(out)
     console.print(table.to_markdown(), highlight=False, markup=False, emoji=False)
@@ -967,8 +1018,9 @@ def morph_synth_cmd(
     """Generate motions for every train caption and refine each with the physics projection P (Morph)."""
     from physmotion.morph.synth import SynthConfig, synthesize
 
-    cfg = _with(SynthConfig(), per_caption=per_caption, seed=seed, workers=workers, ilc_passes=ilc,
-                controller=controller, policy=_opt_str(policy))  # fmt: skip
+    with _as_options(ilc_passes="--ilc", controller="--controller"):  # SynthConfig checks P's settings
+        cfg = _with(SynthConfig(), per_caption=per_caption, seed=seed, workers=workers, ilc_passes=ilc,
+                    controller=controller, policy=_opt_str(policy))  # fmt: skip
     report = synthesize(_model_dir(model), data, out, cfg, progress=sys.stderr.isatty())
     console.print(f"{out}: {report.done} new item(s), {report.total_done}/{report.planned} done in "
                   f"{report.seconds:.0f} s (sampling {report.sampling_seconds:.0f} s, physics "
@@ -1056,7 +1108,8 @@ def morph_run_cmd(
     check_output(out, "folder", overwrite=True)
     model = _model_dir(model)
     check_run_dir(out, model)
-    synth_cfg = _with(SynthConfig(), per_caption=per_caption, seed=seed, ilc_passes=ilc)
+    with _as_options(ilc_passes="--ilc"):
+        synth_cfg = _with(SynthConfig(), per_caption=per_caption, seed=seed, ilc_passes=ilc)
     ft_cfg = _with(FinetuneConfig(model="", synth="", data=str(data), out=""), steps=steps, mix=mix, lr=lr, seed=seed,
                    floor=floor)  # fmt: skip
     rows = run_rounds(model, data, out, rounds, synth_cfg, ft_cfg, progress=sys.stderr.isatty())

@@ -156,6 +156,7 @@ class Motion:
         if not path.is_file():
             raise MotionFormatError(f"{path}: no such file")
         try:
+            _check_zip(path)
             with np.load(path, allow_pickle=False) as data:
                 if "joints" not in data:
                     raise MotionFormatError(f"{path}: not a motion file (no 'joints' array)")
@@ -181,6 +182,8 @@ class Motion:
                 )
                 _check_pose_arrays(motion, path)
                 return motion
+        except ShapeError as exc:  # Motion's own checks (NaN, zero frames, fps) do not know the file
+            raise MotionFormatError(f"{path}: {exc}") from None
         except PhysmotionError:
             raise
         except Exception as exc:  # noqa: BLE001 - corrupt npz bytes raise zipfile, zlib, tokenize,
@@ -188,6 +191,18 @@ class Motion:
             detail = " ".join(str(exc).split())[:160]
             why = f"{type(exc).__name__}: {detail}"
             raise MotionFormatError(f"{path}: not a readable .npz file ({why})") from None
+
+
+def _check_zip(path: Path) -> None:
+    """Refuse a file that is not a zip archive (an .npz is one) before np.load sees it: np.load takes any
+    other bytes for a pickle and answers with advice to load it with ``allow_pickle``, which is unsafe."""
+    with open(path, "rb") as f:
+        head = f.read(2)
+    if head != b"PK":  # every zip record starts so (PKWARE APPNOTE 4.3.7: local header 0x04034b50)
+        hint = (f"; a .bvh is read with `physmotion import {path} -o <name>.npz`" if path.suffix.lower() == ".bvh"
+                else "")
+        raise MotionFormatError(f"{path}: not a motion .npz (a zip of arrays with 'joints', as physmotion "
+                                f"writes){hint}")
 
 
 def _check_pose_arrays(motion: Motion, path: Path) -> None:

@@ -155,7 +155,7 @@ def test_project_writes_the_simulated_motion(mocap_dir: Path, tmp_path: Path) ->
     fine = Motion.load(tmp_path / "fine.npz")
     assert fine.joints.shape == (60, 22, 3) and not np.array_equal(fine.joints, Motion.load(out).joints)
     res = run("project", npz, "-o", tmp_path / "bad.npz", "--ilc", "-1")
-    assert res.returncode == 1 and res.stderr.startswith("error: ilc_passes") and res.stderr.count("\n") == 1
+    assert res.returncode == 1 and res.stderr.startswith("error: --ilc ") and res.stderr.count("\n") == 1
     assert not (tmp_path / "bad.npz").exists()
     res = run("project", tmp_path / "missing.npz", "-o", tmp_path / "x.npz")
     assert res.returncode == 1 and res.stderr.startswith("error: ") and not (tmp_path / "x.npz").exists()
@@ -269,7 +269,7 @@ def test_generate_with_a_biomo_model(tiny_biomo_dir: Path, tmp_path: Path) -> No
     for bad in (("--speed", "0"), ("--phys-scale", "-1")):
         res = run(*common, "--overwrite", *bad)
         assert res.returncode == 1 and res.stderr.startswith("error: ") and res.stderr.count("\n") == 1, res.stderr
-        assert bad[0].strip("-").replace("-", "_") in res.stderr
+        assert res.stderr.startswith(f"error: {bad[0]} "), res.stderr  # the option as typed, not its field
 
 
 def test_train_biomo_on_a_263_build_is_a_one_line_error(built_dir: Path, tmp_path: Path) -> None:

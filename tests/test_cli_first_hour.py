@@ -227,7 +227,7 @@ def test_physics_summary_without_falls() -> None:
 # 3. output paths checked before any work
 
 
-def test_check_output_cases(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_check_output_cases(tmp_path: Path) -> None:
     afile, adir, full = tmp_path / "f.npz", tmp_path / "d", tmp_path / "full"
     afile.write_text("x")
     adir.mkdir()
@@ -250,9 +250,10 @@ def test_check_output_cases(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> 
     for kwargs, message in cases:
         with pytest.raises(OutputPathError, match=message):
             check_output(**kwargs)
-    monkeypatch.setattr("os.access", lambda path, mode: False)  # a read-only folder (root ignores chmod)
-    with pytest.raises(OutputPathError, match="is not writable"):
-        check_output(tmp_path / "new.npz")
+    # Folders that refuse new files whoever asks (root ignores chmod, and os.access says yes in /proc and /sys).
+    for unwritable in ("/proc/physmotion_test/new.npz", "/sys/new.bvh"):
+        with pytest.raises(OutputPathError, match="is not writable"):
+            check_output(unwritable)
     assert (full / "kept.txt").read_text() == "x" and afile.read_text() == "x"
 
 

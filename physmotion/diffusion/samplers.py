@@ -15,6 +15,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import torch
 
+from physmotion.conventions import CFG_SCALE_RANGE
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.schedule import SAMPLERS, sampling_scheduler
 from physmotion.errors import PhysmotionError
@@ -51,8 +52,10 @@ class SamplerConfig:
             raise PhysmotionError(f"steps must be between 1 and 1000, got {self.steps}")
         if not 0.0 <= self.eta <= 1.0:
             raise PhysmotionError(f"eta must be between 0 and 1, got {self.eta}")
-        if not np.isfinite(self.cfg_scale):
-            raise PhysmotionError(f"cfg_scale must be a finite number, got {self.cfg_scale}")
+        lo, hi = CFG_SCALE_RANGE
+        if not (np.isfinite(self.cfg_scale) and lo <= self.cfg_scale <= hi):
+            raise PhysmotionError(f"cfg_scale must be between {lo:g} and {hi:g} (MDM's default: 2.5), "
+                                  f"got {self.cfg_scale:g}")  # fmt: skip
         if self.phys_scale is not None and not (np.isfinite(self.phys_scale) and self.phys_scale >= 0):
             raise PhysmotionError(f"phys_scale must be a number >= 0, got {self.phys_scale}")
         if not (np.isfinite(self.speed) and 0.0 < self.speed <= 4.0):

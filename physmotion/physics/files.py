@@ -41,9 +41,9 @@ def teacher_path(out: Path) -> Path:
 
 def project_file(source: str | Path, out: str | Path, config: ProjectionConfig, teacher: bool = False,
                  on_step: Callable[[int, int], None] | None = None) -> FileResult:  # fmt: skip
-    """Project the motion in ``source`` (.npz) and write the result to ``out`` (and, with ``teacher`` under
-    the search, its teacher records beside it), atomically. The input kept by imitation selection carries
-    none of the simulation's records."""
+    """Project the motion in ``source`` (.npz) and write the result to ``out`` (.npz, or .bvh by its suffix;
+    and, with ``teacher`` under the search, its teacher records beside it), atomically. The input kept by
+    imitation selection carries none of the simulation's records."""
     from physmotion.metrics.report import help_words
     from physmotion.motion import Motion
 
@@ -59,7 +59,9 @@ def project_file(source: str | Path, out: str | Path, config: ProjectionConfig, 
         from physmotion.physics.search import save_teacher
 
         save_teacher(teacher_path(out), result, motion)
-    replace(motion, joints=result.joints, rotations=None, offsets=None, **sim).save(out)
+    from physmotion.io.export import save_motion  # by suffix: .npz (with the records above) or .bvh
+
+    save_motion(replace(motion, joints=result.joints, rotations=None, offsets=None, **sim), out)
     kept = "simulation kept" if result.selected else "tracking failed: input kept (flagged)"
     if config.ilc_passes:
         kept += f" (pass {int(result.ilc_pass)} of {config.ilc_passes + 1})"
