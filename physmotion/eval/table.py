@@ -23,7 +23,11 @@ row is; ``none`` is measured as sampled.
 at least once (MPJPE past tau, 0.15 m in generation) and ``resets`` the mean number of those jumps per
 motion. ``residual_force`` and ``residual_torque`` (with their 95th percentiles) are the root residual P
 applied to its outputs, the outside help its body got, over every frame, in body weights (x 1 m for the
-torque). Neither is Morph's imitation failure rate: ``imitation_failure_rate``, given for the ``morph`` mode, is
+torque), and ``residual_at_cap`` the share of frames in which it was held at one of its caps (force, lift
+or torque). Against the ``none`` row's plain samples of the same requests (when it is evaluated):
+``flight_kept``, the median share of a flying sample's flight the output keeps, and ``step_jumps``, the
+share of outputs with a frame-to-frame jump 2 cm beyond the sample's largest
+(:mod:`physmotion.metrics.dynamics`): Phys-Err alone rewards a flattened jump. Neither is Morph's imitation failure rate: ``imitation_failure_rate``, given for the ``morph`` mode, is
 the share of its motions whose imitation failed (MPJPE past 0.5 m), so that the sampled motion was kept.
 """
 
@@ -65,7 +69,8 @@ BETTER = {"R@1": "↑", "R@2": "↑", "R@3": "↑", "FID": "↓", "MM-Dist": "�
 RESET_COLUMNS = {"reset_rate": "reset_rate (share)", "resets": "resets (per motion)",
                  "fell": "projections that fell (share)",
                  "residual_force": "root force (W)", "residual_force_p95": "root force p95 (W)",
-                 "residual_at_cap": "root force at cap (share)",
+                 "residual_at_cap": "root help at a cap (share)",
+                 "flight_kept": "flight kept (median)", "step_jumps": "jumps past the sample's (share)",
                  "residual_torque": "root torque (W m)", "residual_torque_p95": "root torque p95 (W m)",
                  "over_limit": "joint torque over limit (share)",
                  "imitation_failure_rate": "imitation_failure_rate (share)"}
@@ -174,6 +179,7 @@ def evaluate(
     total, done = cfg.repeats * len(items) * len(cfg.modes), 0
 
     rows: dict[str, dict[str, tuple[float, float]]] = {}
+    plain: dict[int, list[np.ndarray]] = {}  # repeat -> the none row's samples, for what the others kept
     if cfg.real_row:
         real_phys = _real_physical(items, cfg)  # the same in every repeat: measured once
         runs = [_real_run(evaluator, items, r, cfg, real_emb, text_emb) | real_phys for r in range(cfg.repeats)]
@@ -195,6 +201,10 @@ def evaluate(
             run.update(_physical(joints, metric_surface(cfg.surface, bodies)))
             run["sec/motion"] = seconds / len(items)
             run.update(resets)
+            if mode == "none":
+                plain[r] = joints
+            elif r in plain:
+                run.update(_kept(joints, plain[r]))
             runs.append(run)
             per_text.append(emb)
         rows[mode] = _summarise(runs, np.stack(per_text, axis=1) if cfg.repeats > 1 else None)
@@ -271,6 +281,14 @@ def _generate(model, captions, items, gen_cfg, batch, tick) -> tuple[list, list,
     return joints, bodies, time.perf_counter() - start, columns
 
 
+def _kept(joints: list[np.ndarray], samples: list[np.ndarray]) -> dict[str, float]:
+    """``flight_kept`` (where some sample flies) and ``step_jumps`` of outputs against their samples."""
+    from physmotion.metrics.dynamics import flight_kept, step_jumps
+
+    kept = flight_kept(joints, samples)
+    return {"step_jumps": step_jumps(joints, samples)} | ({} if kept is None else {"flight_kept": kept})
+
+
 def _scores(emb, text_emb, real_emb, r, cfg) -> dict[str, float]:
     """FID, R@1-3, MM-Dist and Diversity of one run; R-Precision batches are shuffled per repeat."""
     order = np.random.default_rng((cfg.seed, 3, r)).permutation(len(emb))
@@ -290,7 +308,8 @@ def _physical(joints: Sequence[np.ndarray], body) -> dict[str, float]:
 
 def _summarise(runs: list[dict[str, float]], per_text: np.ndarray | None) -> dict[str, tuple[float, float]]:
     """Mean and 95% half-width over runs; MultiModality from per_text (N, repeats, D) over captions."""
-    out = {k: confidence_interval([run[k] for run in runs]) for k in runs[0]}
+    keys = dict.fromkeys(k for run in runs for k in run)  # flight_kept: only in runs where a sample flies
+    out = {k: confidence_interval([run[k] for run in runs if k in run]) for k in keys}
     if per_text is not None:
         out["MModality"] = confidence_interval(multimodality_per_text(per_text))
     return out

@@ -50,14 +50,19 @@ def test_quick_table_has_every_row_and_metric(quick_table):
         # the residual is bounded by the sampling preset's caps (0.3 W, 1 W m); a tiny model's motions need it
         assert 0 < row["residual_force"][0] <= row["residual_force_p95"][0] <= 0.3 + 1e-6
         assert 0 < row["residual_torque"][0] <= row["residual_torque_p95"][0] <= 1.0 + 1e-6
-        # the share of frames at the 0.3 W cap: some, since the p95 of a tiny model's motions sits there
+        # frames held at a cap (force, lift or torque): some wherever the force's p95 sits at its 0.3 W cap
         at_cap = row["residual_at_cap"][0]
-        assert 0 <= at_cap <= 1 and (at_cap > 0.05) == (row["residual_force_p95"][0] > 0.297)
+        assert 0 <= at_cap <= 1 and (at_cap > 0.05 or row["residual_force_p95"][0] <= 0.297)
+        assert 0 <= row["step_jumps"][0] <= 1 and row.get("flight_kept", (1.0, 0))[0] >= 0
     # post:1 projects each output once, and a projection that fell is one with a reset
     assert quick_table.rows["post:1"]["fell"][0] == pytest.approx(quick_table.rows["post:1"]["reset_rate"][0])
     for name in (REAL, "none", "none+floor"):
         row = quick_table.rows[name]
         assert "reset_rate" not in row and "residual_force" not in row and "ifr" not in row
+    # against the plain samples: a constant shift onto the floor keeps all flight and adds no jump
+    floor = quick_table.rows["none+floor"]
+    assert floor["step_jumps"][0] == 0.0 and floor.get("flight_kept", (1.0, 0))[0] == pytest.approx(1.0)
+    assert "step_jumps" not in quick_table.rows["none"] and "step_jumps" not in quick_table.rows[REAL]
     # the metrics' floor convention: real motions grounded on the body surface sink nowhere, and
     # none+floor never penetrates more than none
     assert quick_table.rows[REAL]["penetrate"][0] < 2.0
