@@ -11,7 +11,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from physmotion import cli
+from physmotion.cli.io import RIG_NAMES
 from tests.cli_runner import invoke
 
 HEAVY = ("torch", "transformers", "diffusers", "mujoco", "scipy", "sentence_transformers")
@@ -33,7 +33,7 @@ def _modules_after(*argv: str) -> tuple[set[str], str]:
 def test_rig_names_match_the_tables() -> None:
     from physmotion.io.rigs import RIGS
 
-    assert tuple(RIGS) == cli.RIG_NAMES
+    assert tuple(RIGS) == RIG_NAMES
 
 
 def test_help_imports_nothing_heavy() -> None:
@@ -41,6 +41,17 @@ def test_help_imports_nothing_heavy() -> None:
     assert heavy == set()
     heavy, _ = _modules_after("generate", "--help")
     assert heavy == set()
+
+
+def test_python_m_runs_the_package_with_commands_in_help_order() -> None:
+    """``python -m physmotion.cli`` (the package's __main__.py) is the console script; its --help lists the
+    commands in the order the command modules register them (physmotion/cli/__init__.py's imports)."""
+    res = subprocess.run([sys.executable, "-m", "physmotion.cli", "--help"], capture_output=True, text=True,
+                         timeout=120, check=False)  # fmt: skip
+    assert res.returncode == 0 and res.stdout.startswith("Usage: python -m physmotion.cli "), res.stderr
+    listed = [line.split()[0] for line in res.stdout.split("Commands:\n", 1)[1].splitlines() if line.strip()]
+    assert listed == ["import", "export", "project", "metrics", "refine", "generate", "evaluate", "render",
+                      "view", "serve", "data", "train", "morph"]  # fmt: skip
 
 
 def test_argument_errors_come_before_torch(tmp_path: Path) -> None:

@@ -290,7 +290,7 @@ def test_console_script_generate_morph_writes_the_same_files(tmp_path: Path) -> 
 def test_shipped_model_names_work_from_any_folder(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """``--model base``, ``morph`` and ``default`` name the shipped folders wherever the user stands; the
     default is the Morph-tuned model, and ``generate.json`` records which one made the motions."""
-    from physmotion.cli import _model_dir
+    from physmotion.cli._common import _model_dir
     from physmotion.diffusion.model import BASE_MODEL_DIR, DEFAULT_MODEL_DIR
 
     monkeypatch.chdir(tmp_path)

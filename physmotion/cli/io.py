@@ -1,0 +1,67 @@
+"""``physmotion import`` and ``export``: mocap files in, motions out (physmotion.io)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from physmotion.cli._common import OVERWRITE_HELP, _check_out, app, console
+from physmotion.errors import PhysmotionError
+from physmotion.paths import MOTION_SUFFIXES
+
+# The rig tables' names for `import --rig`'s help (physmotion.io.rigs.RIGS, which imports scipy: not
+# imported for --help; tests/test_cli_cold.py checks the two agree).
+RIG_NAMES = ("bandai", "cmu_bvh_cgspeed_max", "cmu_bvh_cgspeed_max_scaled_m", "cmu_asf", "cmu_iclone_cc_base",
+             "mixamo", "mixamo_plain", "smpl22")  # fmt: skip
+
+
+@app.command("import")
+def import_motion(
+    path: Path | None = typer.Argument(None, help="A .bvh or .amc file (an .amc needs --asf)."),
+    out: Path | None = typer.Option(None, "-o", "--out", help="Output .npz (or .bvh)."),
+    rig: str | None = typer.Option(
+        None, help=f"Rig table: {', '.join(RIG_NAMES)}; guessed if left out. '--rig list' describes them."
+    ),
+    mapping: Path | None = typer.Option(
+        None, help="JSON file naming the file's joint for each of our 22 joints, plus optional units, "
+        "up_axis and fps, for a rig without a table (docs/examples/mapping_bandai.json); an End Site is "
+        "named '<parent>_end'. Flags override it."),
+    asf: Path | None = typer.Option(None, help="The skeleton (.asf) of an .amc file."),
+    fps: float | None = typer.Option(None, help="True frame rate, where the header is wrong or absent."),
+    up_axis: str | None = typer.Option(None, help="Y or Z, overriding the rig's or mapping's."),
+    units: str | None = typer.Option(None, help="cm, m, inch or a factor to metres, overriding the rig's or mapping's."),
+    overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
+) -> None:
+    """Import one mocap file to the 22-joint skeleton at 20 fps, Y up, facing +Z, its stance soles on the
+    floor (y = 0)."""
+    from physmotion.io.rigs import RIGS, describe_rig
+
+    if rig == "list":
+        for name, table in RIGS.items():
+            console.print(f"{name}: {describe_rig(table)}", highlight=False)
+        return
+    if path is None or out is None:
+        raise PhysmotionError("import needs a FILE and -o OUT (or --rig list to see the rig tables)")
+    _check_out(out, overwrite, MOTION_SUFFIXES)
+    from physmotion.io.export import save_motion
+    from physmotion.io.importer import import_clip
+
+    motion = import_clip(path, rig=rig, mapping=mapping, asf=asf, fps=fps, up_axis=up_axis, units=units)
+    save_motion(motion, out)
+    console.print(f"wrote {out}: {motion.num_frames} frames, {motion.seconds:.1f} s", highlight=False)
+
+
+@app.command("export")
+def export_motion(
+    path: Path = typer.Argument(..., help="A motion .npz."),
+    out: Path = typer.Option(..., "-o", "--out", help="Output .bvh or .npz."),
+    overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
+) -> None:
+    """Write a motion to BVH (metres, Y up, the 22-joint rig) or .npz."""
+    from physmotion.io.export import save_motion
+    from physmotion.motion import Motion
+
+    _check_out(out, overwrite, MOTION_SUFFIXES)
+    save_motion(Motion.load(path), out)
+    console.print(f"wrote {out}", highlight=False)
