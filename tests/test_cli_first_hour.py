@@ -115,7 +115,7 @@ def test_cli_metrics_same_named_files_stay_apart(three_x: Path) -> None:
         assert f"#{k}  {name}/x.npz" in out  # each file named whole in the legend
     float_row = next(line for line in out.splitlines() if line.startswith("│ float "))
     values = [float(v) for v in float_row.split("│")[3:6]]  # metric, unit, then the three files
-    assert values[0] == values[1] == 0.0 and values[2] > 50  # three columns, c's lifted
+    assert values[0] == values[1] < 1.0 and values[2] > 50  # three columns, c's lifted
 
     res = cli("metrics", *(three_x / n / "x.npz" for n in "abc"), "--json")
     assert res.returncode == 0, res.stderr
@@ -205,11 +205,11 @@ def test_cli_generate_explains_falls(tiny_model_dir: Path, tmp_path: Path) -> No
               "--model", tiny_model_dir, "-o", tmp_path / "g")  # fmt: skip
     assert res.returncode == 0, res.stderr
     line = next(line for line in res.stdout.splitlines() if line.startswith("physics:"))
-    assert "fell in 1 of 1 projections" in line and "put back onto the motion (a reset)" in line, line
-    assert "jump" in line
+    assert "fell in 1 of 1 projections" in line and "put back onto the motion" in line, line
+    assert "cross-faded" in line and "not simulated" in line
     (run,) = json.loads((tmp_path / "g" / "generate.json").read_text())["runs"]
     resets = run["motions"][0]["resets"]
-    assert resets >= 1 and f"{resets} such jump(s) in 1 of 1 files" in line
+    assert resets >= 1 and f"{resets} time(s) in all, in 1 of 1 motions" in line
     assert "root residual force mean" in line and "torque mean" in line  # the external help, always reported
 
 
