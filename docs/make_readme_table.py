@@ -35,19 +35,25 @@ def table(path: Path = DEFAULT) -> str:
     result = json.loads(Path(path).read_text())
     rows = result["rows"]
     lines = [
-        "| motion | physical error, mm | sinking / floating / sliding, mm | realism: FID "
-        "| matches its text: R@3 | outputs with a reset | outside help: force on the pelvis, body weights (p95; frames at the cap) |",
-        "|---|---|---|---|---|---|---|",
+        "| motion | physical error, mm | sinking / floating / sliding, mm | flight kept | realism: FID "
+        "| matches its text: R@3 | outputs with a reset (projections that fell) "
+        "| outside help on the pelvis: force, W (p95) / torque, W m (p95); frames held at a cap |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for key, words in ROWS:
         row = rows[key]
-        resets = f"{100 * row['reset_rate']['mean']:.0f} %" if "reset_rate" in row else "-"
+        resets = "-"
+        if "reset_rate" in row:
+            fell = f" ({100 * row['fell']['mean']:.0f} %)" if "fell" in row else ""
+            resets = f"{100 * row['reset_rate']['mean']:.0f} %{fell}"
+        flight = _cell(row, "flight_kept", ".2f") if "flight_kept" in row else "-"
         helped = "-"  # the root residual P applied; the tables made before it was measured lack it
         if "residual_force" in row:
             at_cap = f"; {100 * row['residual_at_cap']['mean']:.0f} %" if "residual_at_cap" in row else ""
-            helped = f"{_cell(row, 'residual_force', '.2f')} ({_cell(row, 'residual_force_p95', '.2f')}{at_cap})"
+            helped = (f"{_cell(row, 'residual_force', '.2f')} ({_cell(row, 'residual_force_p95', '.2f')}) / "
+                      f"{_cell(row, 'residual_torque', '.2f')} ({_cell(row, 'residual_torque_p95', '.2f')}){at_cap}")
         parts = " / ".join(_cell(row, k, ".1f") for k in ("penetrate", "float", "skate"))
-        cells = (_cell(row, "phys_err", ".1f"), parts, _cell(row, "FID", ".3f"), _cell(row, "R@3", ".2f"),
+        cells = (_cell(row, "phys_err", ".1f"), parts, flight, _cell(row, "FID", ".3f"), _cell(row, "R@3", ".2f"),
                  resets, helped)
         lines.append(f"| {words} | " + " | ".join(cells) + " |")
     meta = result["meta"]

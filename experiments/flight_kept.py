@@ -1,0 +1,125 @@
+"""How much of a generated jump's flight does generation's P keep? Plain samples of jump and hop prompts,
+then P under the sampling preset and variants of it, each against its own plain sample.
+
+Usage: python -m experiments.flight_kept [--seeds 0,1,2] [--seconds 4] [--variants sampling,ballistic,...]
+       [--mode physdiff:end:2,space:1 --mode ...] [--out results/flight_kept]
+
+Rows: each ``--mode`` (default: generate's default, PhysDiff with P at the last 2 steps) is ``generate``
+with that physics mode against the plain sample of the same prompt and seed; every other row is one P (as ``post:1``) of the plain samples under a variant of
+:meth:`ProjectionConfig.sampling` (:data:`VARIANTS`). Columns: flight kept (median of output over
+sample flight where the sample flies, :mod:`physmotion.metrics.dynamics`), the share of outputs with a
+reset, jumps past the sample's largest frame step + 2 cm, the root help (force and torque p95, share
+held at a cap), and Phys-Err. The prompts are the jump and hop categories of the unseen-prompt benchmark
+(``experiments/prompts.py`` ``NEW_PROMPTS``) and :data:`FRESH`, written for this study.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from experiments._results import ROOT, heading, markdown_table, report, run_meta, write_results
+
+FRESH: tuple[str, ...] = ("a person jumps up and lands softly", "someone jumps on the spot twice",
+                          "a person skips forward", "someone hops over a small box")  # fmt: skip
+
+
+def _variant(name: str):
+    """The P of a row: the sampling preset with one change."""
+    from physmotion.physics.projection import ProjectionConfig
+    from physmotion.physics.shaping import ShapingConfig
+
+    base = ProjectionConfig.sampling()
+    if name == "sampling":
+        return base
+    if name == "ballistic":  # the plain preset's ballistic flight phases in the reference
+        return replace(base, shaping=replace(base.shaping, ballistic_flight=True))
+    if name == "no_land":  # a body short of a flight is reset into the air instead of landing
+        return replace(base, let_land=False)
+    if name == "ballistic_no_land":
+        return replace(base, let_land=False, shaping=replace(base.shaping, ballistic_flight=True))
+    if name == "lift_0.3":  # the lift cap up to the force cap
+        return replace(base, tracking=replace(base.tracking, residual_lift=0.3))
+    raise ValueError(f"unknown variant {name!r}")
+
+
+VARIANTS = ("sampling", "ballistic", "no_land", "ballistic_no_land", "lift_0.3")
+
+
+def measure(seeds: list[int], seconds: float, variants: list[str], modes: list[str]) -> dict[str, dict]:
+    """Row name -> figures (see the module docstring)."""
+    from experiments.prompts import NEW_PROMPTS
+    from physmotion.diffusion.model import MotionDiffusion
+    from physmotion.diffusion.physdiff import on_data_floor
+    from physmotion.generate import GenerateConfig, generate
+    from physmotion.metrics import physical_metrics
+    from physmotion.metrics.dynamics import flight_ratios, step_jumps
+    from physmotion.metrics.report import help_stats
+    from physmotion.motion import Motion
+    from physmotion.physics.projection import project
+    from physmotion.physics.surface import HumanoidSurface
+
+    prompts = [*NEW_PROMPTS["jump"], *NEW_PROMPTS["hop"], *FRESH]
+    model = MotionDiffusion.load()
+    plain, outputs = [], {}
+    for seed in seeds:
+        cfg = GenerateConfig(seconds=seconds, physics="none", seed=seed)
+        plain += [m.joints for m in generate(prompts, cfg, model=model).motions]
+        for mode in modes:
+            res = generate(prompts, replace(cfg, physics=mode), model=model)
+            outputs.setdefault(mode, []).extend(res.motions)
+    for name in variants:
+        config = _variant(name)
+        res = project(np.stack([on_data_floor(j) for j in plain]), config=config)
+        outputs[name] = [Motion(joints=res.joints[i], humanoid=res.body[i], **res.record(i).motion_fields(
+            config.residual_bound())) for i in range(len(plain))]  # fmt: skip
+    rows = {}
+    for name, motions in outputs.items():
+        joints = [m.joints for m in motions]
+        ratios = flight_ratios(joints, plain)
+        phys = physical_metrics(np.stack(joints), body=HumanoidSurface([m.humanoid for m in motions]))
+        rows[name] = {"flight_kept": float(np.median(ratios)) if ratios else None, "flying": len(ratios),
+                      "flight_kept_each": ratios, "motions": len(motions),
+                      "with_reset": float(np.mean([(m.resets or 0) > 0 for m in motions])),
+                      "step_jumps": step_jumps(joints, plain), "phys_err": float(phys["phys_err"]),
+                      **help_stats(motions)}  # fmt: skip
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", default="0,1,2")
+    parser.add_argument("--seconds", type=float, default=4.0)
+    parser.add_argument("--variants", default=",".join(VARIANTS))
+    parser.add_argument("--mode", action="append", default=None,
+                        help="a generate physics mode to measure (repeatable; default: generate's default)")
+    parser.add_argument("--out", default=str(ROOT / "results" / "flight_kept"))
+    args = parser.parse_args(argv)
+
+    def run() -> tuple[str, list[Path]]:
+        seeds = [int(s) for s in args.seeds.split(",")]
+        variants = [v for v in args.variants.split(",") if v]
+        for v in variants:
+            _variant(v)  # a bad name fails before any work
+        from physmotion.generate import GenerateConfig
+
+        modes = args.mode if args.mode is not None else [str(GenerateConfig().physics)]
+        rows = measure(seeds, args.seconds, variants, [m for m in modes if m])
+        meta = run_meta(__file__, argv, {name: "sampling" for name in rows}, seeds=seeds, seconds=args.seconds)
+        header = ["row", "flight kept (median)", "flying samples", "outputs with a reset", "jumps past the sample's",
+                  "root force p95, W", "root torque p95, W m", "held at a cap", "Phys-Err, mm"]
+        body = [[name, "-" if r["flight_kept"] is None else f"{r['flight_kept']:.2f}", r["flying"],
+                 f"{100 * r['with_reset']:.0f} %", f"{100 * r['step_jumps']:.0f} %",
+                 f"{r['residual_force_p95']:.2f}", f"{r['residual_torque_p95']:.2f}",
+                 f"{100 * r['residual_at_cap']:.0f} %", f"{r['phys_err']:.1f}"] for name, r in rows.items()]  # fmt: skip
+        table = heading("Flight kept by generation's P on jump and hop prompts", meta) + markdown_table(header, body)
+        return table, write_results(args.out, table, {"meta": meta, "rows": rows})
+
+    return report(run)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
