@@ -28,11 +28,14 @@ from physmotion.text.length import (
     length_examples,
 )
 
+SHIPPED = Path(*LENGTH_MODEL_DIR.parts[-3:])  # physmotion/weights/length, as the meta names it
+
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=Path("data_build/all"), help="a `data build` folder")
-    parser.add_argument("--model", type=Path, default=LENGTH_MODEL_DIR, help="the length model measured")
+    parser.add_argument("--model", type=Path, default=None, help="the length model measured (default: the "
+                        f"shipped one, {SHIPPED})")
     parser.add_argument("--seed", type=int, default=CAPTION_SPLIT_SEED)
     parser.add_argument("--out", type=Path, default=Path("results/length_split"))
     args = parse_args(parser, argv)
@@ -50,7 +53,7 @@ def main(argv: list[str] | None = None) -> int:
             ("constant 6 s", f"{r.test_mae_const6:.2f}"),
             ("constant: its train examples' mean", f"{r.test_mae_mean:.2f}"),
         ])  # fmt: skip
-        meta = run_meta(__file__, argv, args.tree, None, data=str(args.data), model=str(args.model),
+        meta = run_meta(__file__, argv, args.tree, None, data=str(args.data), model=str(args.model or SHIPPED),
                         seed=args.seed)
         sides = ", ".join(f"{r.examples[s]} {s} examples in {r.groups[s]} groups" for s in r.examples)
         md = heading("The length model on unseen captions (a split by caption)", meta) + (
