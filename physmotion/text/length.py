@@ -387,8 +387,8 @@ def _write_card(out: Path, data: Path, examples: list[LengthExample], report: Le
          "test examples have a caption that train or val has. The second table splits by caption instead "
          f"(seed {cs['seed']}; examples sharing a caption or a clip stay on one side: {n['train']} train, "
          f"{n['val']} val, {n['test']} test examples): a model refit the same way on its train + val, and "
-         f"this model, which saw {cs['test_captions_seen']} of those {n['test']} test captions. On captions it "
-         f"has not seen the refit errs by {cs['refit_test_mae']:.2f} s (the constant mean: "
+         f"this model, which saw {cs['test_captions_seen']} of those {n['test']} test captions. On captions "
+         f"it has not seen the refit errs by {cs['refit_test_mae']:.2f} s (the constant mean: "
          f"{cs['test_mae_mean']:.2f} s), so the first table overstates the model on new wordings."),
         "",
         "| test split (caption examples) | MAE, s |",
