@@ -394,6 +394,23 @@ def test_imitator_card_json_is_its_training_record() -> None:
     assert made_with == {k: card[k] for k in made_with}
 
 
+def test_the_length_card_quotes_the_caption_split() -> None:
+    """physmotion/weights/length's card (card.json and README.md) gives results/length_split.json's figures:
+    the length model on a split by caption (experiments/length_split.py)."""
+    split = _load("length_split.json")["caption_split"]
+    folder = ROOT / "physmotion" / "weights" / "length"
+    assert json.loads((folder / "card.json").read_text())["report"]["caption_split"] == split
+    n = split["examples"]
+    quotes = [
+        f"{n['train']} train, {n['val']} val, {n['test']} test examples",
+        f"| refit on its train + val (ridge {split['refit_alpha']:g}) | {split['refit_test_mae']:.2f} |",
+        f"saw {split['test_captions_seen']} of the {n['test']} captions) | {split['model_test_mae']:.2f} |",
+        f"errs by {split['refit_test_mae']:.2f} s (the constant mean: {split['test_mae_mean']:.2f} s)",
+    ]
+    flat = " ".join((folder / "README.md").read_text().split())
+    assert all(q in flat for q in quotes), [q for q in quotes if q not in flat]
+
+
 def test_readme_table_is_the_scripts_output() -> None:
     """README.md's results table is docs/make_readme_table.py's output for results/evaluate_default.json,
     between its two marker comments."""
