@@ -1,9 +1,14 @@
 """What every experiment writes: ``results/<name>.md`` (the table) and ``results/<name>.json`` (the
 figures), the JSON with a ``meta`` block saying what made it: P's preset(s) by name
-(:mod:`physmotion.physics.presets`), the commit, the CPU, the date and the command line."""
+(:mod:`physmotion.physics.presets`), the commit, the CPU, the date and the command line.
+
+A figure must come from committed code: :func:`parse_args` gives every experiment the shared
+``--allow-dirty`` flag and refuses, before any work, a tree whose tracked files differ from HEAD unless it
+is given; the meta then records ``"dirty": true`` and the commit with "+dirty"."""
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import platform
@@ -11,6 +16,7 @@ import shlex
 import subprocess
 import sys
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -21,14 +27,45 @@ ROOT = Path(__file__).resolve().parents[1]
 Presets = str | dict[str, str] | None  # one preset, a preset per role or row, or None where P does not run
 
 
-def git_commit() -> str:
-    """``git rev-parse --short HEAD`` of the repository, with "+dirty" where tracked files differ from it."""
+@dataclass(frozen=True)
+class Tree:
+    """The checkout an experiment ran from: HEAD's short hash ("+dirty" appended where tracked files
+    differed from it) and whether they did."""
+
+    commit: str
+    dirty: bool
+
+
+def tree_state(root: Path | None = None) -> Tree:
+    """The state of the git checkout at ``root`` (default: this repository). Tracked files only (``git
+    diff --quiet HEAD``, index and work tree): an untracked file does not count. Outside a git checkout
+    the commit is "unknown" and the tree counts as dirty (nothing says it is clean)."""
 
     def git(*args: str) -> subprocess.CompletedProcess:
-        return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True, check=False)
+        return subprocess.run(["git", *args], cwd=root or ROOT, capture_output=True, text=True, check=False)
 
-    head = git("rev-parse", "--short", "HEAD").stdout.strip() or "unknown"
-    return head + ("+dirty" if git("diff", "--quiet", "HEAD").returncode else "")
+    head = git("rev-parse", "--short", "HEAD")
+    if head.returncode:
+        return Tree("unknown+dirty", True)
+    dirty = git("diff", "--quiet", "HEAD").returncode != 0  # 1: differences; anything else: cannot tell
+    return Tree(head.stdout.strip() + ("+dirty" if dirty else ""), dirty)
+
+
+def parse_args(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> argparse.Namespace:
+    """``parser.parse_args(argv)`` with the flag every experiment shares, ``--allow-dirty``, added; then the
+    checkout is read once, before any work, into ``args.tree`` (:class:`Tree`, what :func:`run_meta`
+    records). A dirty tree without ``--allow-dirty`` exits with one ``error:`` line (status 1)."""
+    parser.add_argument("--allow-dirty", action="store_true",
+                        help="run although tracked files differ from HEAD (the results' meta records "
+                             '"dirty": true); without it a dirty tree is refused')  # fmt: skip
+    args = parser.parse_args(argv)
+    args.tree = tree_state(ROOT)
+    if args.tree.dirty and not args.allow_dirty:
+        unknown = args.tree.commit.startswith("unknown")
+        where = "not a git checkout" if unknown else "tracked files differ from HEAD"
+        raise SystemExit(f"error: {ROOT}: {where}; commit first so the figures name the code that "
+                         "made them, or pass --allow-dirty")  # fmt: skip
+    return args
 
 
 def cpu_model() -> str:
@@ -42,12 +79,14 @@ def cpu_model() -> str:
     return platform.processor() or "unknown CPU"
 
 
-def run_meta(script: str, argv: Sequence[str] | None, preset: Presets, **extra) -> dict:
+def run_meta(script: str, argv: Sequence[str] | None, tree: Tree, preset: Presets, **extra) -> dict:
     """The meta block of a run of the experiment ``script`` (its ``__file__``) with arguments ``argv``
-    (None: this process's); ``extra`` (the experiment's own settings) follows the common keys."""
+    (None: this process's) from the checkout ``tree`` (``args.tree`` of :func:`parse_args`, read when the
+    run began: its own outputs written since do not count); ``extra`` (the experiment's own settings)
+    follows the common keys."""
     args = sys.argv[1:] if argv is None else argv
     command = shlex.join(["python", "-m", f"experiments.{Path(script).stem}", *args])
-    return {"preset": preset, "commit": git_commit(), "cpu": cpu_model(),
+    return {"preset": preset, "commit": tree.commit, "dirty": tree.dirty, "cpu": cpu_model(),
             "date": datetime.now(timezone.utc).isoformat(timespec="seconds"), "command": command, **extra}  # fmt: skip
 
 

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import torch
 
-from experiments._results import run_meta, write_results
+from experiments._results import parse_args, run_meta, write_results
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.samplers import BIOMO_SAMPLER, SamplerConfig
 from physmotion.diffusion.train import STATE_FILE, TrainConfig, train_denoiser
@@ -213,7 +213,7 @@ def main(argv: list[str] | None = None) -> None:
                              "committed table: --no-bf16)")
     parser.add_argument("--train-only", choices=list(RUNS), default=None,
                         help="train this one run and stop (several runs can then train side by side)")
-    args = parser.parse_args(argv)
+    args = parse_args(parser, argv)
     if args.device.startswith("cuda"):
         torch.set_float32_matmul_precision("high")  # TF32 matmuls, as the committed table's GPU run
 
@@ -235,7 +235,7 @@ def main(argv: list[str] | None = None) -> None:
 
     baseline, last = rows[ROWS[0].name], rows[full.name]
     result = {
-        "meta": run_meta(__file__, argv, None) | {
+        "meta": run_meta(__file__, argv, args.tree, None) | {
             "data": args.data,
             "data329": args.data329,
             "steps": args.steps,

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments._results import markdown_table, run_meta, write_results
+from experiments._results import markdown_table, parse_args, run_meta, write_results
 from physmotion.conventions import FPS
 from physmotion.features.humanml3d import recover_from_ric
 from physmotion.metrics.physical import physical_metrics
@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--data", type=Path, default=Path("data_build/mocap"))
     parser.add_argument("--synth", type=Path, nargs="*", default=[])
     parser.add_argument("--out", default="results/data_convention", help="writes OUT.md and OUT.json")
-    args = parser.parse_args(argv)
+    args = parse_args(parser, argv)
     sets: dict[str, list[np.ndarray]] = {}
     for split in ("test", "train"):
         ids = (args.data / f"{split}.txt").read_text().split()
@@ -68,7 +68,8 @@ def main(argv: list[str] | None = None) -> None:
     rows = [(name, m["n"], *(f"{m[k]:.1f}" for k in (*COLUMNS, "phys_err_grounded"))) for name, m in measured.items()]
     md = "# Physical metrics in the data convention and grounded (mm)\n\n" + markdown_table(header, rows) + "\n"
     print(md)
-    write_results(args.out, md, {"meta": run_meta(__file__, argv, None, data=str(args.data)), "sets": measured})
+    meta = run_meta(__file__, argv, args.tree, None, data=str(args.data))
+    write_results(args.out, md, {"meta": meta, "sets": measured})
 
 if __name__ == "__main__":
     main()

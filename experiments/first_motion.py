@@ -44,7 +44,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from experiments._results import cpu_model, markdown_table, run_meta, write_results
+from experiments._results import cpu_model, markdown_table, parse_args, run_meta, write_results
 
 PROMPTS = ["a person walks forward", "a person jumps in place", "a person waves the right hand",
            "a person runs in a circle", "a person sits down", "a person kicks with the left leg",
@@ -211,7 +211,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--threads", type=int, default=0,
                         help="torch threads in every process (OMP_NUM_THREADS; 0: torch's default)")
     parser.add_argument("--out", default="results/first_motion", help="writes OUT.md and OUT.json")
-    args = parser.parse_args(argv)
+    args = parse_args(parser, argv)
     args.modes = [m.strip() for m in args.modes.split(",") if m.strip()]
     args.prompts = max(1, min(args.prompts, len(PROMPTS)))
     work = Path(tempfile.mkdtemp(prefix="first_motion-"))
@@ -245,8 +245,9 @@ def _write(args: argparse.Namespace, argv: list[str] | None, rows: list[Row], ro
     md = (f"# {title}\n\nBaseline: {BASELINE} ({base:.2f} s median).\n\n{table}\n\nAcceptance lines of issue 51 "
           "this run measures (medians):\n\n" + "\n".join(_acceptance(stats, args.prompts)) + "\n")
     print(md, flush=True)
-    meta = run_meta(__file__, argv, {"physdiff": "sampling", "morph": "plain"}, runs=args.runs, rounds_done=rounds,
-                    prompts=args.prompts, seconds=args.seconds, modes=args.modes, cold_cache=args.cold_cache,
+    meta = run_meta(__file__, argv, args.tree, {"physdiff": "sampling", "morph": "plain"}, runs=args.runs,
+                    rounds_done=rounds, prompts=args.prompts, seconds=args.seconds, modes=args.modes,
+                    cold_cache=args.cold_cache,
                     cores=os.cpu_count(), torch_threads=threads, load_average=[round(x, 2) for x in load])  # fmt: skip
     write_results(args.out, md, {"meta": meta, "baseline": BASELINE, "seconds": stats})
 

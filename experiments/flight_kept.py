@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments._results import ROOT, heading, markdown_table, report, run_meta, write_results
+from experiments._results import ROOT, heading, markdown_table, parse_args, report, run_meta, write_results
 
 FRESH: tuple[str, ...] = ("a person jumps up and lands softly", "someone jumps on the spot twice",
                           "a person skips forward", "someone hops over a small box")  # fmt: skip
@@ -97,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--mode", action="append", default=None,
                         help="a generate physics mode to measure (repeatable; default: generate's default)")
     parser.add_argument("--out", default=str(ROOT / "results" / "flight_kept"))
-    args = parser.parse_args(argv)
+    args = parse_args(parser, argv)
 
     def run() -> tuple[str, list[Path]]:
         seeds = [int(s) for s in args.seeds.split(",")]
@@ -108,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
 
         modes = args.mode if args.mode is not None else [str(GenerateConfig().physics)]
         rows = measure(seeds, args.seconds, variants, [m for m in modes if m])
-        meta = run_meta(__file__, argv, {name: "sampling" for name in rows}, seeds=seeds, seconds=args.seconds)
+        meta = run_meta(__file__, argv, args.tree, {name: "sampling" for name in rows}, seeds=seeds, seconds=args.seconds)
         header = ["row", "flight kept (median)", "flying samples", "outputs with a reset", "jumps past the sample's",
                   "root force p95, W", "root torque p95, W m", "held at a cap", "Phys-Err, mm"]
         body = [[name, "-" if r["flight_kept"] is None else f"{r['flight_kept']:.2f}", r["flying"],

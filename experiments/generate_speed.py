@@ -39,7 +39,7 @@ from dataclasses import replace
 
 import mujoco
 
-from experiments._results import markdown_table, run_meta, write_results
+from experiments._results import markdown_table, parse_args, run_meta, write_results
 from experiments.prompts import PHYSICS_PROMPTS
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.samplers import ddim_50, default_sampler
@@ -81,7 +81,7 @@ def main(argv: list[str] | None = None) -> None:
                         help="a Morph-tuned model folder (physmotion/weights/morph): times its none, post:1 "
                              "and morph")
     parser.add_argument("--out", default="results/generate_speed", help="writes OUT.md and OUT.json")
-    args = parser.parse_args(argv)
+    args = parse_args(parser, argv)
     model = MotionDiffusion.load(args.model)
     base = GenerateConfig(seconds=args.seconds, sampler=ddim_50(), projection=preset("sampling"),
                           morph_projection=preset("plain"))  # fmt: skip
@@ -128,8 +128,8 @@ def main(argv: list[str] | None = None) -> None:
     header = ("mode", "batch 1 (s)", "batch 16 (s)", "s/motion at 16", "vs none, batch 1", "vs none, batch 16")
     md = f"# {title}\n\n" + markdown_table(header, rows) + "\n"
     print(md)
-    meta = run_meta(__file__, argv, {"physdiff, post": "sampling", f"{PHYSDIFF} at 1/720 s": "sampling_fine",
-                                     "morph": "plain"}, seconds=args.seconds, repeats=args.repeats)  # fmt: skip
+    presets = {"physdiff, post": "sampling", f"{PHYSDIFF} at 1/720 s": "sampling_fine", "morph": "plain"}
+    meta = run_meta(__file__, argv, args.tree, presets, seconds=args.seconds, repeats=args.repeats)
     seconds = {mode: {str(batch): t for (m, batch), t in times.items() if m == mode} for mode, _ in times}
     write_results(args.out, md, {"meta": meta, "seconds": seconds})
 

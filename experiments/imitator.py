@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments._results import run_meta, write_results
+from experiments._results import parse_args, run_meta, write_results
 from physmotion.conventions import FPS
 from physmotion.physics.presets import preset
 
@@ -54,7 +54,8 @@ def _meta(args: argparse.Namespace, argv: list[str] | None, preset_name: str) ->
     from physmotion.physics.policy import load_policy
 
     policy = load_policy(args.policy)
-    return run_meta(__file__, argv, preset_name, policy=args.policy or "shipped", policy_cap=policy.settings.cap,
+    return run_meta(__file__, argv, args.tree, preset_name, policy=args.policy or "shipped",
+                    policy_cap=policy.settings.cap,
                     policy_card={k: policy.card.get(k) for k in ("iterations", "samples", "wall_minutes", "hardware")})
 
 
@@ -174,7 +175,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--limit", type=int, default=0, help="captured: only N clips, evenly spread")
     parser.add_argument("--out", default=None)
     parser.add_argument("--partial", default=None, help="generated: rewrite the rows so far to this JSON file")
-    args = parser.parse_args(argv)
+    args = parse_args(parser, argv)
     rows, meta = generated(args, argv) if args.part == "generated" else captured(args, argv)
     table = _table(rows, args.part)
     print(table)

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments._results import markdown_table, run_meta, write_results
+from experiments._results import markdown_table, parse_args, run_meta, write_results
 from physmotion.io import import_clip, import_clip_with_report, load_manifest, save_bvh
 from physmotion.io.floor import hand_frames, stance_frames
 from physmotion.metrics import physical_metrics
@@ -39,7 +39,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--round-trip-every", type=int, default=1)
     parser.add_argument("--generated", action="store_true")
     parser.add_argument("--out", default="results/import_floor", help="writes OUT.md and OUT.json")
-    args = parser.parse_args(argv)
+    args = parse_args(parser, argv)
     sources = args.source or [REPO / ".." / "shared" / "data" / "mocap", REPO / ".." / "shared" / "data" / "hdm05"]
     rows: dict[str, list[dict[str, float]]] = defaultdict(list)
     trip: dict[str, list[float]] = defaultdict(list)
@@ -97,7 +97,7 @@ def main(argv: list[str] | None = None) -> None:
         md += "\nGenerated (P's output) BVH round trip, mm: " + ", ".join(
             f"{k} mean {v['mean_mm']:.4f} max {v['max_mm']:.4f}" for k, v in generated.items()) + "\n"
     print(md)
-    meta = run_meta(__file__, argv, None, sources=[str(s) for s in sources], every=args.every,
+    meta = run_meta(__file__, argv, args.tree, None, sources=[str(s) for s in sources], every=args.every,
                     round_trip_every=args.round_trip_every)
     write_results(args.out, md, {"meta": meta, "sources": summary, "generated": generated})
 

@@ -23,7 +23,7 @@ import json
 import sys
 from pathlib import Path
 
-from experiments._results import report, run_meta
+from experiments._results import parse_args, report, run_meta
 from physmotion.checkpoint import weights_sha256
 from physmotion.diffusion.model import DEFAULT_MODEL_DIR, MotionDiffusion
 from physmotion.diffusion.samplers import ddim_50
@@ -120,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--control", action="append", default=[], type=Path,
                         help="a model made by `morph finetune --mix 0` (repeatable)")
-    args = parser.parse_args(argv)
+    args = parse_args(parser, argv)
 
     def run() -> tuple[str, list[Path]]:
         cfg = EvaluateConfig(split=args.split, repeats=args.repeats, seed=args.seed,
@@ -128,7 +128,8 @@ def main(argv: list[str] | None = None) -> int:
         parts = Path(f"{args.out}.parts")
         table = morph_table(args.data, args.run, args.base, cfg, Evaluator.load(args.evaluator), parts,
                             args.control)
-        table.meta.update(run_meta(__file__, argv, {"post, physdiff": "sampling", "morph": "plain"}))
+        presets = {"post, physdiff": "sampling", "morph": "plain"}
+        table.meta.update(run_meta(__file__, argv, args.tree, presets))
         return table.to_markdown(), table.write(args.out)
 
     return report(run)

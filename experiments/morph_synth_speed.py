@@ -22,7 +22,7 @@ import json
 import tempfile
 from pathlib import Path
 
-from experiments._results import markdown_table, run_meta, write_results
+from experiments._results import markdown_table, parse_args, run_meta, write_results
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.samplers import SamplerConfig
 from physmotion.morph.synth import SynthConfig, synthesize, train_captions
@@ -41,7 +41,7 @@ def main(argv: list[str] | None = None) -> None:
                         help="P's iterative learning control passes, as `morph run --ilc`")
     parser.add_argument("--run", type=Path, default=None, help="a finished `morph run` folder")
     parser.add_argument("--out", default="results/morph_synth_speed", help="writes OUT.md and OUT.json")
-    args = parser.parse_args(argv)
+    args = parse_args(parser, argv)
 
     model = MotionDiffusion.load(args.model)
     captions = train_captions(args.data)[: args.captions]
@@ -68,8 +68,9 @@ def main(argv: list[str] | None = None) -> None:
     print(md)
     figures = {"motions": report.done, "seconds": report.seconds, "sampling_seconds": report.sampling_seconds,
                "physics_seconds": report.physics_seconds, "items_per_second": report.items_per_second}
-    meta = run_meta(__file__, argv, "plain", model=str(args.model), captions=len(captions),  # Morph's selection
-                    per_caption=args.per_caption, steps=args.steps, ilc_passes=args.ilc)
+    meta = run_meta(__file__, argv, args.tree, "plain", model=str(args.model),  # Morph's selection
+                    captions=len(captions), per_caption=args.per_caption, steps=args.steps,
+                    ilc_passes=args.ilc)
     write_results(args.out, md, {"meta": meta, "figures": figures, "rows": rows})
 
 

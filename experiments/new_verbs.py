@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments._results import ROOT, markdown_table, report, run_meta, write_results
+from experiments._results import ROOT, markdown_table, parse_args, report, run_meta, write_results
 
 PROMPTS: dict[str, list[str]] = {
     "squat": ["a person squats down and stands back up", "someone does a deep squat", "a man squats once"],
@@ -65,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--seconds", type=float, default=4.0)
     ap.add_argument("--out", type=Path, default=ROOT / "results" / "new_verbs")
-    args = ap.parse_args(argv)
+    args = parse_args(ap, argv)
     models = args.model or ["default"]
 
     def run() -> tuple[str, list[Path]]:
@@ -86,7 +86,8 @@ def main(argv: list[str] | None = None) -> int:
             f"Plain sampling (`none`), {args.seconds:g} s, {n} motions per verb ({args.seeds} seeds x 6 prompts: "
             f"the HDM05 caption, the two paraphrases the tests use, and three fresh ones).\n\n{table}\n"
         )
-        meta = run_meta(__file__, argv, None, seeds=args.seeds, seconds=args.seconds, prompts=every)
+        meta = run_meta(__file__, argv, args.tree, None, seeds=args.seeds, seconds=args.seconds,
+                        prompts=every)
         return table, write_results(args.out, md, {"meta": meta, "models": figures})
 
     return report(run)

@@ -30,7 +30,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from experiments._results import markdown_table, run_meta, write_results
+from experiments._results import markdown_table, parse_args, run_meta, write_results
 from experiments.prompts import NEW_PROMPTS, PHYSICS_PROMPTS
 from physmotion.conventions import FPS
 from physmotion.diffusion.model import MotionDiffusion
@@ -92,7 +92,7 @@ def main(argv: list[str] | None = None) -> None:
                         help="every projection at 1/720 s (generate --fine-step)")
     parser.add_argument("--tau", type=float, default=None,
                         help="the generation P's reset threshold in metres (default: the sampling preset's)")
-    args = parser.parse_args(argv)
+    args = parse_args(parser, argv)
     seeds = [int(s) for s in args.seeds.split(",")]
     model = MotionDiffusion.load(args.model)
     presets = {"physdiff, post": "sampling_fine" if args.fine_step else "sampling",
@@ -104,7 +104,7 @@ def main(argv: list[str] | None = None) -> None:
     run = _new_prompts if args.set == "new" else _physics_prompts
     md, runs, settings = run(model, seeds, base, args.prompts)
     print(md)
-    meta = run_meta(__file__, argv, presets, seeds=seeds, model_steps=model.info.get("steps"),
+    meta = run_meta(__file__, argv, args.tree, presets, seeds=seeds, model_steps=model.info.get("steps"),
                     sim_dt=base.projection.humanoid.sim_dt, tau=base.projection.tau, **settings)  # fmt: skip
     default = "results/new_prompts_default" if args.set == "new" else "results/physdiff_quality"
     write_results(args.out or default, md, {"meta": meta, "runs": runs})

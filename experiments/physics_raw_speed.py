@@ -18,7 +18,7 @@ import time
 import mujoco
 import numpy as np
 
-from experiments._results import markdown_table, run_meta, write_results
+from experiments._results import markdown_table, parse_args, run_meta, write_results
 from physmotion.physics.humanoid import build_model
 from physmotion.physics.presets import preset
 from physmotion.physics.retarget import joints_to_qpos, qpos_to_joints
@@ -51,7 +51,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--seconds", type=float, default=5.0)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--out", default="results/physics_raw_speed", help="writes OUT.md and OUT.json")
-    args = ap.parse_args(argv)
+    args = parse_args(ap, argv)
 
     model = build_model(None, preset("plain").humanoid)  # P's humanoid
     steps = int(round(args.seconds / model.opt.timestep))
@@ -99,7 +99,7 @@ def main(argv: list[str] | None = None) -> None:
     table = markdown_table(("what", "per second", "note"), [(w, f"{r:,.0f}", n) for w, r, n in rows])
     md = f"# Raw physics speed\n\n{title}\n\n{table}\n"
     print(md)
-    meta = run_meta(__file__, argv, "plain", mujoco=mujoco.__version__, sim_dt=model.opt.timestep)
+    meta = run_meta(__file__, argv, args.tree, "plain", mujoco=mujoco.__version__, sim_dt=model.opt.timestep)
     write_results(args.out, md, {"meta": meta, "rows": [{"what": w, "per_second": r, "note": n} for w, r, n in rows]})
 
 

@@ -22,7 +22,7 @@ from dataclasses import replace
 import mujoco
 import numpy as np
 
-from experiments._results import markdown_table, run_meta, write_results
+from experiments._results import markdown_table, parse_args, run_meta, write_results
 from physmotion.io.importer import import_clip, load_manifest
 from physmotion.physics.humanoid import build_model, standing_height
 from physmotion.physics.presets import preset, preset_names
@@ -64,7 +64,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seconds", type=float, default=6.0)
     parser.add_argument("--preset", default="plain", choices=preset_names(), help="P's preset")
     parser.add_argument("--out", default="results/physics_speed", help="writes OUT.md and OUT.json")
-    args = parser.parse_args(argv)
+    args = parse_args(parser, argv)
     cfg = preset(args.preset)
     clips = {c.clip: c for c in load_manifest(args.mocap)}
     joints = import_clip(clips[CLIP], floor="frame0").joints[: int(args.seconds * 20)]  # P's input convention
@@ -100,7 +100,7 @@ def main(argv: list[str] | None = None) -> None:
     figures = {"raw_steps_per_second": raw, "latency_s": latency, "latency_residual_every_step_s": latency_every_step,
                "latency_ilc_s": latency_ilc, "sim_steps": sim_steps, "tracked": bool(one.success),
                "batch": args.batch, "batch_seconds": {str(w): s for w, s in timings.items()}}  # fmt: skip
-    meta = run_meta(__file__, argv, args.preset, clip=CLIP, seconds=args.seconds)
+    meta = run_meta(__file__, argv, args.tree, args.preset, clip=CLIP, seconds=args.seconds)
     write_results(args.out, md, {"meta": meta, "figures": figures})
 
 if __name__ == "__main__":

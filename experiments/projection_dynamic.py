@@ -22,7 +22,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from experiments._results import run_meta, write_results
+from experiments._results import parse_args, run_meta, write_results
 from experiments.projection_quality import by_category, category_table, measure_clips, spread
 from physmotion.io.importer import load_manifest
 from physmotion.physics.presets import preset
@@ -97,7 +97,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--mocap", default="../shared/data/mocap")
     parser.add_argument("--out", default="results/projection_dynamic", help="writes OUT.md and OUT.json")
     parser.add_argument("--limit", type=int, default=0, help="only every k-th clip, N clips (a quick look)")
-    args = parser.parse_args(argv)
+    args = parse_args(parser, argv)
     clips = spread(load_manifest(args.mocap), args.limit)
     results, seconds = {}, {}
     for name, preset_name in ROWS.items():
@@ -106,7 +106,8 @@ def main(argv: list[str] | None = None) -> None:
         results[name] = by_category(clips, measure_clips(clips, config), config.residual_bound())
         seconds[name] = time.perf_counter() - start
         print(f"{name}: {seconds[name]:.0f} s", flush=True)
-    meta = run_meta(__file__, argv, dict(ROWS), clips=len(clips), mocap=str(args.mocap), seconds=seconds)
+    meta = run_meta(__file__, argv, args.tree, dict(ROWS), clips=len(clips), mocap=str(args.mocap),
+                    seconds=seconds)
     md = _markdown(results, seconds)
     write_results(args.out, md, {"meta": meta, "configs": results})
     print(md)

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments._results import markdown_table, run_meta, write_results
+from experiments._results import markdown_table, parse_args, run_meta, write_results
 from physmotion.io.importer import ClipInfo, import_clip, load_manifest
 from physmotion.metrics import physical_metrics
 from physmotion.metrics.physical import skate_factors
@@ -203,7 +203,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--walks-runs", action="store_true", help="only the walking/running clips")
     parser.add_argument("--preset", default="plain", choices=preset_names(), help="P's preset")
     parser.add_argument("--out", default="results/projection_quality", help="writes OUT.md and OUT.json")
-    args = parser.parse_args(argv)
+    args = parse_args(parser, argv)
     clips = locomotion_clips(args.mocap) if args.walks_runs else load_manifest(args.mocap)
     clips = clips[: args.limit] if args.limit else clips
     start = time.perf_counter()
@@ -215,7 +215,8 @@ def main(argv: list[str] | None = None) -> None:
     md = (f"# P on {len(clips)} captured clips by category (preset {args.preset}, {seconds:.0f} s)\n\n"
           f"{category_table(rows)}\n\nfailed: {', '.join(failed) or '-'}\n")
     print(md)
-    meta = run_meta(__file__, argv, args.preset, clips=len(clips), mocap=str(args.mocap), seconds=seconds)
+    meta = run_meta(__file__, argv, args.tree, args.preset, clips=len(clips), mocap=str(args.mocap),
+                    seconds=seconds)
     write_results(args.out, md, {"meta": meta, "rows": rows, "failed": failed})
 
 

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments._results import run_meta, write_results
+from experiments._results import parse_args, run_meta, write_results
 from physmotion.conventions import FPS
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.refine import RefineConfig, low_pass, refine
@@ -136,13 +136,14 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--strengths", default=",".join(f"{s:g}" for s in STRENGTHS),
                         help="comma-separated refine strengths (default: %(default)s)")
     parser.add_argument("--device", default="cpu", help="where the model runs: cpu or cuda")
-    args = parser.parse_args(argv)
+    args = parse_args(parser, argv)
     strengths = tuple(float(s) for s in args.strengths.split(","))
     t0 = time.time()
     table, meta = run_table(args.data, args.limit, args.seed, args.model, strengths, args.device)
     meta["seconds"] = round(time.time() - t0, 1)
     md = to_markdown(table, meta)
-    write_results(args.out, md, {"meta": run_meta(__file__, argv, None) | meta, "rows": table})  # no P here
+    meta = run_meta(__file__, argv, args.tree, None) | meta  # no P here
+    write_results(args.out, md, {"meta": meta, "rows": table})
     print(md)
 
 

@@ -26,6 +26,7 @@ from experiments._results import (
     ROOT,
     heading,
     markdown_table,
+    parse_args,
     report,
     run_meta,
     within_interval,
@@ -140,7 +141,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=ROOT / "results" / "retrained_default")
     ap.add_argument("--title", default="The old and the retrained default model (issue 50, item 4)")
     ap.add_argument("--names", default="old,new", help="what the table calls the two models, comma-separated")
-    args = ap.parse_args(argv)
+    args = parse_args(ap, argv)
 
     def run() -> tuple[str, list[Path]]:
         modes = tuple(str(m) for m in parse_modes(args.physics))
@@ -149,7 +150,7 @@ def main(argv: list[str] | None = None) -> int:
         names = args.names.split(",")
         if len(names) != 2:
             raise PhysmotionError(f"--names takes two names, got {args.names!r}")
-        meta = run_meta(__file__, argv, preset={"physdiff": "sampling"}, data=args.data,
+        meta = run_meta(__file__, argv, args.tree, preset={"physdiff": "sampling"}, data=args.data,
                         evaluator=args.evaluator, title=args.title, names=dict(zip(LABELS, names)),
                         models={"old": args.old, "new": args.new}, motions=m["motions"], repeats=REPEATS,
                         trained_on={k: f"{v['meta']['model_trained_on']}, {v['meta']['model_steps']} steps, "

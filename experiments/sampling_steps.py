@@ -31,7 +31,15 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from experiments._results import heading, markdown_table, report, run_meta, within_interval, write_results
+from experiments._results import (
+    heading,
+    markdown_table,
+    parse_args,
+    report,
+    run_meta,
+    within_interval,
+    write_results,
+)
 from physmotion.errors import PhysmotionError
 
 BASELINE = "ddim50"
@@ -209,12 +217,13 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--skip-timing", action="store_true", help="the quality table only")
     parser.add_argument("--out", default="results/sampling_steps", help="output stem")
-    args = parser.parse_args(argv)
+    args = parse_args(parser, argv)
 
     def run() -> tuple[str, list[Path]]:
         tdir = Path(args.tables)
         tables = eval_tables(RUNS, args.data, tdir)
-        meta = run_meta(__file__, argv, "sampling", motions=tables[BASELINE]["meta"]["motions"], data=args.data,
+        meta = run_meta(__file__, argv, args.tree, "sampling", motions=tables[BASELINE]["meta"]["motions"],
+                        data=args.data,
                         evaluate_commands={r.name: evaluate_command(r, args.data, tdir) for r in RUNS})  # fmt: skip
         times: dict[Setting, list[float]] = {}
         if not args.skip_timing:

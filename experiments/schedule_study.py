@@ -15,7 +15,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 
-from experiments._results import report, run_meta
+from experiments._results import parse_args, report, run_meta
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.samplers import ddim_50
 from physmotion.errors import PhysmotionError
@@ -102,7 +102,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=50, help="DDIM steps")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--plot-only", action="store_true", help="redraw <out>.png from <out>.json")
-    args = parser.parse_args(argv)
+    args = parse_args(parser, argv)
 
     def run() -> tuple[str, list[Path]]:
         if args.plot_only:
@@ -113,7 +113,8 @@ def main(argv: list[str] | None = None) -> int:
         cfg.base.sampler.steps = args.steps
         table = schedule_study(MotionDiffusion.load(args.model), Evaluator.load(args.evaluator), args.data,
                                counts, cfg)  # fmt: skip
-        table.meta.update(run_meta(__file__, argv, "sampling"))  # EvaluateConfig's base: generation's P
+        # EvaluateConfig's base: generation's P
+        table.meta.update(run_meta(__file__, argv, args.tree, "sampling"))
         return table.to_markdown(), write_study(table, args.out)
 
     return report(run)

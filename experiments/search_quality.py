@@ -27,7 +27,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from experiments._results import markdown_table, run_meta, write_results
+from experiments._results import markdown_table, parse_args, run_meta, write_results
 from experiments.projection_quality import category, measure_projection
 from physmotion.conventions import FPS
 from physmotion.io.importer import ClipInfo, import_clip, load_manifest
@@ -168,7 +168,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seed", type=int, default=0, help="generation's seed")
     parser.add_argument("--no-cone-row", action="store_true", help="leave out the search under the pyramidal cone")
     parser.add_argument("--out", default="results/search_quality", help="writes OUT.md and OUT.json")
-    args = parser.parse_args(argv)
+    args = parse_args(parser, argv)
     warnings.filterwarnings("ignore", message=".*read as Latin-1")  # HDM05's header bytes, as documented
     efforts = [e for e in args.efforts.split(",") if e]
     for e in efforts:
@@ -183,7 +183,7 @@ def main(argv: list[str] | None = None) -> None:
         motions += [("generated", kind, j) for kind, j in generated_set(args.seconds, args.seeds, prompts, args.seed)]
     print(f"{len(motions)} motions", flush=True)
     configs = rows(efforts, cost, cone_row=not args.no_cone_row)
-    meta = run_meta(__file__, argv, "plain", efforts=efforts, cost=args.cost or "default")
+    meta = run_meta(__file__, argv, args.tree, "plain", efforts=efforts, cost=args.cost or "default")
     per: dict[str, dict[str, list[dict]]] = {}
     seconds: dict[str, float] = {}
     for label, config in configs.items():  # the table is written after every row: a long run keeps what it has

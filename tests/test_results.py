@@ -31,7 +31,9 @@ DOCS = {
     "decisions": ROOT / "docs" / "decisions" / "README.md",
     "base card": ROOT / "physmotion" / "weights" / "base" / "README.md",
     "morph card": ROOT / "physmotion" / "weights" / "morph" / "README.md",
+    "imitator card": ROOT / "physmotion" / "weights" / "imitator" / "README.md",
 }
+IMITATOR = ROOT / "physmotion" / "weights" / "imitator"
 
 
 def _load(name: str) -> dict:
@@ -268,6 +270,24 @@ def imitator_quotes() -> list[str]:
     ]
 
 
+def imitator_card_quotes() -> list[str]:
+    """The imitator's card (physmotion/weights/imitator/README.md): its training from card.json, and how good
+    it is from results/imitator_captured.json (the policy and the tracker at the policy's bound and at its
+    own)."""
+    card = json.loads((IMITATOR / "card.json").read_text())
+    cap = {r["controller"]: r for r in _load("imitator_captured.json")["rows"] if r["category"] == "all"}
+    t, c, p = cap["tracker"], cap["tracker at cap"], cap["policy"]
+    return [
+        f"{card['iterations']} iterations",
+        f"{card['samples'] / 1e6:.2f} M control steps",
+        f"{card['wall_minutes']:.1f} minutes",
+        f"residual bounded at {p['residual_force_p95']:.2f} W",
+        f"({100 * p['success']:.1f} % against {100 * c['success']:.1f} % of {p['clips']} clips)",
+        f"(MPJPE {p['mpjpe_mm']:.1f} against {c['mpjpe_mm']:.1f} mm)",
+        f"full {t['residual_force_p95']:.1f} W residual ({100 * t['success']:.1f} %, {t['mpjpe_mm']:.1f} mm)",
+    ]
+
+
 def _pair_rows(name: str) -> dict[tuple[str, str], dict]:
     """An experiments/retrained_default.py table (results/<name>.json) by (model label, physics mode)."""
     return {(r["model"], r["physics"]): r for r in _load(name)["rows"]}
@@ -324,6 +344,7 @@ QUOTES = {  # which doc quotes which result file
     ("morph card", "evaluate"): evaluate_quotes,
     ("morph card", "bench"): bench_quotes,
     ("results", "biomodiffuse"): biomodiffuse_quotes,
+    ("imitator card", "imitator captured"): imitator_card_quotes,
 }
 
 
@@ -335,7 +356,8 @@ def _section(text: str, source: str) -> str:
              "dynamic": "projection_dynamic",
              "new prompts": "new_prompts_default", "new prompts base": "new_prompts_base",
              "new prompts fine": "new_prompts_fine",
-             "biomodiffuse": "results/biomodiffuse", "refine": "results/refine", "imitator": "results/imitator_"}
+             "biomodiffuse": "results/biomodiffuse", "refine": "results/refine", "imitator": "results/imitator_",
+             "imitator captured": "results/imitator_captured"}
     marker = files[source]
     return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
 
@@ -347,6 +369,46 @@ def test_docs_quote_the_results_files(doc: str, source: str) -> None:
     flat = " ".join(text.split())
     missing = [q for q in QUOTES[doc, source]() if q not in flat]
     assert not missing, f"{doc} does not quote these {source} figures: {missing}"
+
+
+def test_imitator_card_json_is_its_training_record() -> None:
+    """card.json's figures are those of the files the training wrote: its last evaluation per bound is
+    train_eval.csv's last row for that bound, its iterations and samples train_log.csv's last row's and the
+    sum of its two runs' (as are the minutes); and results/imitator_captured.json was made with this policy."""
+    import csv
+
+    card = json.loads((IMITATOR / "card.json").read_text())
+    with open(IMITATOR / "train_eval.csv", newline="") as f:
+        evals = list(csv.DictReader(f))
+    last = {row["cap"]: {k: v for k, v in row.items() if k != "run"} for row in evals}  # the last row per cap
+    assert card["last_evaluation"] == [last[e["cap"]] for e in card["last_evaluation"]]
+    assert {e["cap"] for e in card["last_evaluation"]} == set(last)
+    with open(IMITATOR / "train_log.csv", newline="") as f:
+        final = list(csv.DictReader(f))[-1]
+    assert (int(final["iteration"]), int(final["samples"])) == (card["iterations"], card["samples"])
+    runs = card["training_runs"]
+    assert sum(r["samples"] for r in runs) == card["samples"]
+    assert round(sum(r["minutes"] for r in runs), 1) == card["wall_minutes"]
+    assert runs[-1]["iterations"].endswith(f"-{card['iterations']}")
+    made_with = _load("imitator_captured.json")["meta"]["policy_card"]
+    assert made_with == {k: card[k] for k in made_with}
+
+
+def test_the_length_card_quotes_the_caption_split() -> None:
+    """physmotion/weights/length's card (card.json and README.md) gives results/length_split.json's figures:
+    the length model on a split by caption (experiments/length_split.py)."""
+    split = _load("length_split.json")["caption_split"]
+    folder = ROOT / "physmotion" / "weights" / "length"
+    assert json.loads((folder / "card.json").read_text())["report"]["caption_split"] == split
+    n = split["examples"]
+    quotes = [
+        f"{n['train']} train, {n['val']} val, {n['test']} test examples",
+        f"| refit on its train + val (ridge {split['refit_alpha']:g}) | {split['refit_test_mae']:.2f} |",
+        f"saw {split['test_captions_seen']} of the {n['test']} captions) | {split['model_test_mae']:.2f} |",
+        f"errs by {split['refit_test_mae']:.2f} s (the constant mean: {split['test_mae_mean']:.2f} s)",
+    ]
+    flat = " ".join((folder / "README.md").read_text().split())
+    assert all(q in flat for q in quotes), [q for q in quotes if q not in flat]
 
 
 def test_readme_table_is_the_scripts_output() -> None:
@@ -417,6 +479,24 @@ def test_every_result_names_its_preset_commit_and_command() -> None:
         assert not missing, f"{path.name}: its meta lacks {sorted(missing)}"
         named = meta["preset"].values() if isinstance(meta["preset"], dict) else [meta["preset"]]
         assert all(p is None or p in preset_names() for p in named), f"{path.name}: preset {meta['preset']}"
+
+
+DIRTY_PENDING = {"physdiff_quality.json"}  # to be re-made from a clean tree (issue 62 item 6); then drop it
+
+
+def test_a_result_from_a_dirty_tree_says_so_and_what_is_known() -> None:
+    """Figures come from committed code (issue 62 item 6): experiments refuse a dirty tree unless given
+    --allow-dirty, and then record "dirty": true; each older file made from a dirty tree ("+dirty" in its
+    commit) carries "dirty": true and a "dirty_note" saying what the uncommitted change is known to be."""
+    for path in sorted(RESULTS.glob("*.json")):
+        meta = json.loads(path.read_text())["meta"]
+        if path.name in DIRTY_PENDING or "commit" not in meta:
+            continue
+        dirty = meta["commit"].endswith("+dirty")
+        assert meta.get("dirty", dirty) == dirty, f"{path.name}: 'dirty' disagrees with its commit"
+        if dirty:
+            assert meta.get("dirty") is True, f"{path.name}: made from a dirty tree without saying so"
+            assert len(meta.get("dirty_note", "")) > 40, f"{path.name}: no dirty_note on what was uncommitted"
 
 
 def test_the_default_sampler_is_within_the_ddim50_rows_intervals() -> None:

@@ -11,7 +11,7 @@ def test_import_floor_writes_each_source(small_mocap_dir: Path, tmp_path: Path) 
     from experiments.import_floor import main
 
     out = tmp_path / "floor"
-    main(["--source", str(small_mocap_dir), "--round-trip-every", "8", "--out", str(out)])
+    main(["--allow-dirty", "--source", str(small_mocap_dir), "--round-trip-every", "8", "--out", str(out)])
     data = json.loads(out.with_suffix(".json").read_text())
     assert data["meta"]["preset"] is None and data["meta"]["round_trip_every"] == 8
     assert sum(s["clips"] for s in data["sources"].values()) == 23
@@ -24,7 +24,7 @@ def test_data_convention_measures_both_splits(small_built_dir: Path, tmp_path: P
     from experiments.data_convention import main
 
     out = tmp_path / "convention"
-    main(["--data", str(small_built_dir), "--out", str(out)])
+    main(["--allow-dirty", "--data", str(small_built_dir), "--out", str(out)])
     sets = json.loads(out.with_suffix(".json").read_text())["sets"]
     assert list(sets) == ["captured, test split", "captured, train split"]
     for row in sets.values():

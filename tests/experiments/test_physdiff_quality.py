@@ -15,7 +15,7 @@ def test_physdiff_quality_writes_its_json(tmp_path: Path) -> None:
     # One prompt, one seed, every mode; --tau reaches the projection and the record.
     out = tmp_path / "pq"
     res = subprocess.run([sys.executable, "-m", "experiments.physdiff_quality", "--prompts", "1",
-                          "--seeds", "0", "--tau", "0.25", "--out", str(out)],
+                          "--seeds", "0", "--tau", "0.25", "--out", str(out), "--allow-dirty"],
                          cwd=ROOT, capture_output=True, text=True, timeout=600, check=False)  # fmt: skip
     assert res.returncode == 0, res.stderr
     assert "reset at 0.25 m" in res.stdout and "reset at 0.25 m" in out.with_suffix(".md").read_text()

@@ -78,7 +78,8 @@ def test_the_experiment_writes_its_table_and_meta(mocap_dir, tmp_path: Path) -> 
     """Two walking clips under the ``fine`` preset: <out>.md and <out>.json, the JSON's meta naming the preset,
     the commit, the CPU, the date and the command."""
     out = tmp_path / "pq"
-    main(["--mocap", str(mocap_dir), "--walks-runs", "--limit", "2", "--preset", "fine", "--out", str(out)])
+    main(["--mocap", str(mocap_dir), "--walks-runs", "--limit", "2", "--preset", "fine", "--out", str(out),
+          "--allow-dirty"])
     data = json.loads(out.with_suffix(".json").read_text())
     meta = data["meta"]
     assert meta["preset"] == "fine" and meta["clips"] == 2

@@ -12,7 +12,8 @@ from experiments.refine import SIGMAS_CM, main
 def test_refine_table_writes_every_row_and_its_meta(small_built_dir: Path, tiny_model_dir: Path,
                                                      tmp_path: Path) -> None:  # fmt: skip
     out = tmp_path / "refine"
-    main(["--data", str(small_built_dir), "--model", str(tiny_model_dir), "--limit", "1", "-o", str(out)])
+    main(["--data", str(small_built_dir), "--model", str(tiny_model_dir), "--limit", "1", "-o", str(out),
+          "--allow-dirty"])
     data = json.loads(out.with_suffix(".json").read_text())
     assert data["meta"]["preset"] is None and data["meta"]["clips"] == 1  # no projection in refinement
     assert data["meta"]["command"].startswith("python -m experiments.refine --data")

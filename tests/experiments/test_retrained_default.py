@@ -59,6 +59,7 @@ def test_main_writes_the_table_and_its_acceptance(tmp_path: Path) -> None:
         str(tmp_path),
         "--out",
         str(out),
+        "--allow-dirty",
     ]
     assert main(argv) == 0
     data = json.loads(out.with_name("cmp.json").read_text())

@@ -43,7 +43,7 @@ def test_rows_are_held_against_ddim50(tmp_path: Path) -> None:
 def test_main_writes_the_table_and_meta(tmp_path: Path) -> None:
     _tables(tmp_path, {r.name: 0.13 for r in RUNS})
     out = tmp_path / "study"
-    assert main(["--tables", str(tmp_path), "--skip-timing", "--out", str(out)]) == 0
+    assert main(["--allow-dirty", "--tables", str(tmp_path), "--skip-timing", "--out", str(out)]) == 0
     data = json.loads(out.with_name("study.json").read_text())
     assert {"preset", "commit", "cpu", "date", "command"} <= set(data["meta"])
     assert len(data["rows"]) == sum(len(r.modes) for r in RUNS)

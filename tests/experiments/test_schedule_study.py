@@ -38,6 +38,6 @@ def test_counts_outside_the_sampling_steps_are_refused(tiny_model, tiny_evaluato
 def test_plot_only_redraws_the_committed_study(tmp_path: Path) -> None:
     """The driver's --plot-only redraws <out>.png from the committed results/schedule_study.json."""
     shutil.copy(Path(__file__).parents[2] / "results" / "schedule_study.json", tmp_path / "study.json")
-    assert main(["--data", "unused", "--out", str(tmp_path / "study"), "--plot-only"]) == 0
+    assert main(["--allow-dirty", "--data", "unused", "--out", str(tmp_path / "study"), "--plot-only"]) == 0
     with Image.open(tmp_path / "study.png") as img:
         assert img.format == "PNG" and img.size[0] > 400

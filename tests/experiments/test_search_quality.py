@@ -41,7 +41,8 @@ def test_summary_pools_motions() -> None:
 
 def test_main_writes_the_table(mocap_dir: Path, hdm05_dir: Path, tmp_path: Path) -> None:
     out = tmp_path / "sq"
-    main(["--mocap", str(mocap_dir), "--hdm05", str(hdm05_dir), "--captured-per", "1", "--categories", "walk",
+    main(["--allow-dirty", "--mocap", str(mocap_dir), "--hdm05", str(hdm05_dir),
+          "--captured-per", "1", "--categories", "walk",
           "--seeds", "0", "--efforts", "fast", "--max-seconds", "1", "--out", str(out)])
     table = (tmp_path / "sq.md").read_text()
     assert "| captured | search fast, elliptic | 1 |" in table

@@ -23,6 +23,8 @@ from physmotion.text.length import (
     LENGTH_MODEL_DIR,
     LO_SECONDS,
     LengthPredictor,
+    caption_groups,
+    caption_split,
     captions_matching,
     length_examples,
     predict_seconds,
@@ -101,6 +103,46 @@ def test_training_is_deterministic_and_the_card_carries_every_licence(length_bui
     assert card["licence_tags"] == ["NC", "SA"]  # Bandai's walk and HDM05's squat are in this build
     seconds = ma.predict(["a person jumps", "a person squats down and stands back up"])
     assert np.all((seconds >= LO_SECONDS) & (seconds <= HI_SECONDS))
+
+
+def _sides(examples, splits: list[str], key) -> dict[str, set[str]]:
+    return {s: {key(e) for e, t in zip(examples, splits) if t == s} for s in set(splits)}
+
+
+def _assert_disjoint(examples, splits: list[str]) -> None:
+    for key in (lambda e: e.text, lambda e: e.clip):
+        sides = list(_sides(examples, splits, key).values())
+        assert all(not (a & b) for i, a in enumerate(sides) for b in sides[i + 1:])
+
+
+def test_the_caption_split_keeps_every_caption_and_clip_on_one_side(built_all_dir: Path) -> None:
+    """On the whole of ../shared/data (mocap and HDM05, built as the shipped model's data): the build's own
+    splits share captions between test and train (HDM05 gives a class one caption), the split by caption
+    shares none and no clip, comes near the build's 80/10/10 and is the same for the same seed."""
+    examples = length_examples(built_all_dir)
+    build = [e.split for e in examples]
+    captions = _sides(examples, build, lambda e: e.text)
+    seen = captions["test"] & (captions["train"] | captions["val"])
+    assert len(seen) > len(captions["test"]) / 2  # the reason for the split by caption
+    splits = caption_split(examples, seed=0)
+    _assert_disjoint(examples, splits)
+    shares = {s: splits.count(s) / len(examples) for s in ("train", "val", "test")}
+    assert shares == pytest.approx({"train": 0.8, "val": 0.1, "test": 0.1}, abs=0.05)
+    assert caption_split(examples, seed=0) == splits and caption_split(examples, seed=1) != splits
+    squats = {g for g, e in zip(caption_groups(examples), examples) if e.text == "squat"}
+    assert len(squats) == 1  # one class's clips, all of them, in one group
+
+
+def test_training_reports_the_caption_split(length_build: Path, tmp_path: Path) -> None:
+    """train_length measures a split by caption too (on this small build of jumps, a walk and a squat):
+    disjoint by caption and clip, and the card gives its figures."""
+    examples = length_examples(length_build)
+    _assert_disjoint(examples, caption_split(examples))
+    report = train_length(length_build, tmp_path / "m")
+    split = report.caption_split
+    assert sum(split["examples"].values()) == len(examples) and split["examples"]["train"] > 0
+    assert split["test_captions_seen"] <= split["examples"]["test"]
+    assert "split by caption" in (tmp_path / "m" / "README.md").read_text()
 
 
 def test_the_shipped_model_and_its_card() -> None:
