@@ -396,8 +396,13 @@ RECORDED: dict[str, MetricInfo] = {
                    "mean root residual torque the projection applied, in body weight x 1 m"),
         MetricInfo("residual_torque_p95", "x W m", "PhysDiff (RFC)", "frames", 0, "lower",
                    "95th percentile over frames of the root residual torque"),
+        MetricInfo("residual_force_peak_p95", "x W", "PhysDiff (RFC)", "frames", 0, "lower",
+                   "95th percentile over frames of the largest root residual force within the frame"),
+        MetricInfo("residual_torque_peak_p95", "x W m", "PhysDiff (RFC)", "frames", 0, "lower",
+                   "95th percentile over frames of the largest root residual torque within the frame"),
         MetricInfo("residual_at_cap", "share", "PhysDiff (RFC)", "frames", 0, "lower",
-                   "share of frames whose root residual force is at the cap the file records"),
+                   "share of frames in which the root residual was held at one of P's caps (force, lift "
+                   "or torque; files that predate that record: the mean force at the force's cap)"),
         MetricInfo("over_limit", "share", "-", "frames", 0, "lower",
                    "share of frames in which a joint's torque passed its actuator's limit"),
     )
