@@ -481,7 +481,7 @@ def test_every_result_names_its_preset_commit_and_command() -> None:
         assert all(p is None or p in preset_names() for p in named), f"{path.name}: preset {meta['preset']}"
 
 
-DIRTY_PENDING = {"physdiff_quality.json"}  # to be re-made from a clean tree (issue 62 item 6); then drop it
+DIRTY_PENDING: set[str] = set()  # files still to be re-made from a clean tree (issue 62 item 6)
 
 
 def test_a_result_from_a_dirty_tree_says_so_and_what_is_known() -> None:
