@@ -332,7 +332,11 @@ def _write_images(path: Path, images: list, fps: float) -> None:
         write_atomic(path, lambda f: images[0].save(f, format="PNG", optimize=True))
     elif suffix == ".gif":
         duration = round(1000 / fps)
-        write_atomic(path, lambda f: images[0].save(f, format="GIF", save_all=True, append_images=images[1:],
+        from PIL import Image
+
+        palette = _gif_palette()
+        frames = [image.quantize(palette=palette, dither=Image.Dither.NONE) for image in images]
+        write_atomic(path, lambda f: frames[0].save(f, format="GIF", save_all=True, append_images=frames[1:],
                                                     duration=duration, loop=0))  # fmt: skip
     else:
         av = _require_av()
@@ -350,6 +354,23 @@ def _write_images(path: Path, images: list, fps: float) -> None:
                     container.mux(packet)
 
         write_atomic(path, encode)
+
+
+def _gif_palette():
+    """A "P" image whose palette holds every colour the drawing uses, and the text's anti-aliased edges
+    (ink and reset red blended into the background, 7 steps each): frames mapped onto it keep their
+    colours exactly, and the encoder need not choose a palette per frame (docs/decisions/tools.md, "one
+    GIF palette for every preview")."""
+    from PIL import Image
+
+    solid = [_BACKGROUND, _GRID_COLOUR, _SHADOW, _INK, CONTACT_COLOUR, RESET_COLOUR, *_CHAIN_COLOURS, *MOTION_COLOURS]
+    back = np.array(_BACKGROUND, dtype=float)
+    edges = [tuple(np.rint(back + (np.array(c) - back) * w).astype(int)) for c in (_INK, RESET_COLOUR)
+             for w in np.linspace(0.125, 0.875, 7)]  # fmt: skip
+    colours = list(dict.fromkeys(map(tuple, solid + edges)))
+    palette = Image.new("P", (1, 1))
+    palette.putpalette([int(v) for c in colours for v in c] + [0, 0, 0] * (256 - len(colours)))
+    return palette
 
 
 def _require_av():

@@ -97,8 +97,8 @@ CONTROLLER_HELP = ("Who drives the simulated humanoid: 'tracker' (the model-base
                    "imitator) or 'search' (no outside hand at all: the body's own joint targets searched; "
                    "seconds of CPU per second of motion).")
 POLICY_HELP = "With --controller policy: the policy folder (the shipped one if left out)."
-PREVIEW_HELP = ("Write a GIF preview beside the output, <stem>.gif (a few seconds for a 6 s motion; "
-                "docs/cli.md).")
+PREVIEW_HELP = ("Write a GIF preview beside the output, <stem>.gif (under a second for a 6 s motion; "
+                "docs/cli.md, Previews).")
 
 
 def _check_preview(out: Path, overwrite: bool) -> None:
