@@ -18,7 +18,7 @@ $(VENV)/.installed: pyproject.toml
 	touch $@
 	@echo "installed: run $(VENV)/bin/physmotion --help"
 
-.PHONY: install demo data test test-fast browser render-png
+.PHONY: install demo data test test-fast browser blender render-png
 install: $(VENV)/.installed
 
 demo: $(VENV)/.installed
@@ -36,8 +36,13 @@ data: $(VENV)/.installed
 browser:
 	command -v chromium >/dev/null || (apt-get update -qq && apt-get install -y -qq chromium)
 
+# tests/test_blender.py imports our exports in headless Blender (Debian's blender, 3.4.1 on bookworm;
+# about a minute to install): install it where it is missing.
+blender:
+	command -v blender >/dev/null || (apt-get update -qq && apt-get install -y -qq blender)
+
 # Both tiers (tests/README.md): the fast one and the `slow` one, in 2 workers that build each shared fixture once.
-test: $(VENV)/.installed browser
+test: $(VENV)/.installed browser blender
 	$(PY) -m pytest -q -n 2 -m "slow or not slow" --durations=20
 
 # The fast tier alone, as plain `pytest` runs it (at most 3 min on 2 cores); needs no browser.

@@ -7,7 +7,8 @@ and the foot joints in contact with the floor (:func:`physmotion.metrics.physica
 rule the Skate metric counts) as magenta dots. Several motions go side by side (one panel each) or
 overlaid in one panel, one colour per motion, with a legend.
 
-``generate``'s previews (:func:`save_gif`) and ``physmotion render`` (:func:`render_files`) share the
+The previews ``generate``, ``project``, ``refine`` and ``import`` write beside their outputs
+(:func:`save_preview`, :func:`save_with_preview`) and ``physmotion render`` (:func:`render_files`) share the
 drawing code; the viewer (:mod:`physmotion.viewer`) shares the loading, labels and time alignment.
 """
 
@@ -331,7 +332,11 @@ def _write_images(path: Path, images: list, fps: float) -> None:
         write_atomic(path, lambda f: images[0].save(f, format="PNG", optimize=True))
     elif suffix == ".gif":
         duration = round(1000 / fps)
-        write_atomic(path, lambda f: images[0].save(f, format="GIF", save_all=True, append_images=images[1:],
+        from PIL import Image
+
+        palette = _gif_palette()
+        frames = [image.quantize(palette=palette, dither=Image.Dither.NONE) for image in images]
+        write_atomic(path, lambda f: frames[0].save(f, format="GIF", save_all=True, append_images=frames[1:],
                                                     duration=duration, loop=0))  # fmt: skip
     else:
         av = _require_av()
@@ -351,6 +356,23 @@ def _write_images(path: Path, images: list, fps: float) -> None:
         write_atomic(path, encode)
 
 
+def _gif_palette():
+    """A "P" image whose palette holds every colour the drawing uses, and the text's anti-aliased edges
+    (ink and reset red blended into the background, 7 steps each): frames mapped onto it keep their
+    colours exactly, and the encoder need not choose a palette per frame (docs/decisions/tools.md, "one
+    GIF palette for every preview")."""
+    from PIL import Image
+
+    solid = [_BACKGROUND, _GRID_COLOUR, _SHADOW, _INK, CONTACT_COLOUR, RESET_COLOUR, *_CHAIN_COLOURS, *MOTION_COLOURS]
+    back = np.array(_BACKGROUND, dtype=float)
+    edges = [tuple(np.rint(back + (np.array(c) - back) * w).astype(int)) for c in (_INK, RESET_COLOUR)
+             for w in np.linspace(0.125, 0.875, 7)]  # fmt: skip
+    colours = list(dict.fromkeys(map(tuple, solid + edges)))
+    palette = Image.new("P", (1, 1))
+    palette.putpalette([int(v) for c in colours for v in c] + [0, 0, 0] * (256 - len(colours)))
+    return palette
+
+
 def _require_av():
     try:
         import av
@@ -359,15 +381,61 @@ def _require_av():
     return av
 
 
+PREVIEW_SUFFIX = ".gif"
+PREVIEW_LABELS: tuple[str, str] = ("input", "output")
+"""The panel labels of a command's two-motion preview (``project``, ``refine``): what it read, what it wrote."""
+
+
+def preview_path(out: str | Path) -> Path:
+    """Where the GIF preview of the motion file ``out`` goes: beside it, ``<stem>.gif``."""
+    return Path(out).with_suffix(PREVIEW_SUFFIX)
+
+
+def save_preview(path: str | Path, motions: Sequence[Motion], labels: Sequence[str] = (), title: str = "") -> None:
+    """Write a command's animated GIF preview atomically: the motions side by side, 320 px a panel.
+
+    Motions at different rates or lengths are shown at :func:`common_rate`; each carries its foot contacts
+    and, where it has ``reset_frames``, the frames P did not simulate, marked as such. labels: one per
+    motion over its panel (e.g. :data:`PREVIEW_LABELS`), or none for a bare single-motion preview."""
+    if labels and len(labels) != len(motions):
+        raise PhysmotionError(f"{len(labels)} labels for {len(motions)} motions")
+    tracks, fps = make_tracks(motions, list(labels) or [""] * len(motions))
+    images = render_frames(tracks, fps, "side", PREVIEW_SIZE, title, labels=bool(labels))
+    _write_images(Path(path), images, fps)
+
+
 def save_gif(path: str | Path, joints: np.ndarray, fps: float, title: str = "",
              not_simulated: np.ndarray | None = None) -> None:  # fmt: skip
     """Write generate's animated GIF preview of one motion atomically: 320 px, the caption as title.
 
     joints: (T, 22, 3) metres, Y up, floor at y = 0; not_simulated: (T,) bool frames to mark as such."""
-    motion = Motion(joints=joints, fps=fps)
-    tracks = [Track("", motion.joints.astype(np.float64), motion_contacts(motion), MOTION_COLOURS[0],
-                    None if not_simulated is None else np.asarray(not_simulated, dtype=bool))]
-    _write_images(Path(path), render_frames(tracks, fps, "side", PREVIEW_SIZE, title, labels=False), fps)
+    marked = None if not_simulated is None else np.asarray(not_simulated, dtype=bool)
+    save_preview(path, [Motion(joints=joints, fps=fps, reset_frames=marked)], title=title)
+
+
+def save_with_preview(motion: Motion, out: str | Path, preview: bool = True, before: Motion | None = None,
+                      title: str = "") -> list[Path]:  # fmt: skip
+    """Write ``motion`` to ``out`` (.npz or .bvh by its suffix) and then, with ``preview``, its GIF at
+    :func:`preview_path` (``before`` given: ``before`` and ``motion`` side by side as input and output),
+    each atomically. A failure of the preview removes the motion file just written: a command leaves
+    both or neither. Without ``preview``, an old GIF there is removed (it showed another motion), as
+    ``generate`` does. Returns the files written."""
+    from physmotion.io.export import save_motion
+
+    out = Path(out)
+    save_motion(motion, out)
+    if not preview:
+        preview_path(out).unlink(missing_ok=True)
+        return [out]
+    try:
+        if before is None:
+            save_preview(preview_path(out), [motion], title=title)
+        else:
+            save_preview(preview_path(out), [before, motion], PREVIEW_LABELS, title)
+    except BaseException:
+        out.unlink(missing_ok=True)
+        raise
+    return [out, preview_path(out)]
 
 
 @dataclass(frozen=True)

@@ -97,6 +97,16 @@ CONTROLLER_HELP = ("Who drives the simulated humanoid: 'tracker' (the model-base
                    "imitator) or 'search' (no outside hand at all: the body's own joint targets searched; "
                    "seconds of CPU per second of motion).")
 POLICY_HELP = "With --controller policy: the policy folder (the shipped one if left out)."
+PREVIEW_HELP = ("Write a GIF preview beside the output, <stem>.gif (under a second for a 6 s motion; "
+                "docs/cli.md, Previews).")
+
+
+def _check_preview(out: Path, overwrite: bool) -> None:
+    """Before any work: refuse an existing ``<stem>.gif`` beside the output ``out`` unless ``overwrite``,
+    with or without --no-preview (without, the write removes it: it showed another motion)."""
+    from physmotion.render import preview_path
+
+    _check_out(preview_path(out), overwrite)
 
 
 def _model_dir(model: Path | None) -> Path | None:

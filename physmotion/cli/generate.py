@@ -17,10 +17,12 @@ from physmotion.cli._common import (
     MODEL_HELP,
     OVERWRITE_HELP,
     POLICY_HELP,
+    PREVIEW_HELP,
     SAMPLER_HELP,
     SAMPLER_OPTIONS,
     _as_options,
     _check_out,
+    _check_preview,
     _check_sampler_options,
     _model_dir,
     _opt_str,
@@ -37,7 +39,8 @@ from physmotion.paths import DEFAULT_MODEL, MOTION_SUFFIXES, WEIGHTS_DIR
 @app.command("refine")
 def refine_cmd(
     path: Path = typer.Argument(..., help="A motion .npz or .bvh (e.g. a pose estimator's output)."),
-    out: Path = typer.Option(..., "-o", "--out", help="Output motion .npz or .bvh (20 fps)."),
+    out: Path = typer.Option(..., "-o", "--out", help="Output motion .npz or .bvh (20 fps), with a GIF "
+                             "preview of input and output side by side beside it (<stem>.gif)."),
     strength: float = typer.Option(0.3, help="Share of the diffusion steps to invert, in [0, 1] (0 returns "
                                    "the input on the dataset's skeleton)."),
     text: str = typer.Option("", help="Caption to condition on (default: none)."),
@@ -52,6 +55,7 @@ def refine_cmd(
     rig: str | None = typer.Option(None, help=BVH_RIG_HELP),
     fps: float | None = typer.Option(None, help=BVH_FPS_HELP),
     mapping: Path | None = typer.Option(None, help=BVH_MAPPING_HELP),
+    preview: bool = typer.Option(True, help=PREVIEW_HELP),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
     """Refine a motion by DDIM inversion and denoising (BioMoDiffuse Sec. 3.5; physics guidance with a
@@ -71,6 +75,7 @@ def refine_cmd(
     if path.suffix.lower() not in (".npz", ".bvh"):
         raise PhysmotionError(f"{path}: refine reads .npz or .bvh")
     _check_out(out, overwrite, MOTION_SUFFIXES)
+    _check_preview(out, overwrite)
     if path.suffix.lower() == ".bvh":
         from physmotion.io.importer import import_clip
 
@@ -80,10 +85,11 @@ def refine_cmd(
     pipeline = RefinePipeline(MotionDiffusion.load(_model_dir(model_dir)), config)
     pipeline.check(motion)  # length and NaN before the work
     refined = pipeline(motion).motion
-    from physmotion.io.export import save_motion
+    from physmotion.render import save_with_preview
 
-    save_motion(refined, out)
-    console.print(f"wrote {out}: {len(refined.joints)} frames, strength {strength:g}", highlight=False)
+    files = save_with_preview(refined, out, preview, before=motion, title=text)
+    console.print(f"wrote {' and '.join(map(str, files))}: {len(refined.joints)} frames, strength {strength:g}",
+                  highlight=False)  # fmt: skip
 
 
 @app.command("generate")

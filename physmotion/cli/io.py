@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from physmotion.cli._common import OVERWRITE_HELP, _check_out, app, console
+from physmotion.cli._common import OVERWRITE_HELP, PREVIEW_HELP, _check_out, _check_preview, app, console
 from physmotion.errors import PhysmotionError
 from physmotion.paths import MOTION_SUFFIXES
 
@@ -19,7 +19,8 @@ RIG_NAMES = ("bandai", "cmu_bvh_cgspeed_max", "cmu_bvh_cgspeed_max_scaled_m", "c
 @app.command("import")
 def import_motion(
     path: Path | None = typer.Argument(None, help="A .bvh or .amc file (an .amc needs --asf)."),
-    out: Path | None = typer.Option(None, "-o", "--out", help="Output .npz (or .bvh)."),
+    out: Path | None = typer.Option(None, "-o", "--out", help="Output .npz (or .bvh), with a GIF preview "
+                                    "beside it (<stem>.gif)."),
     rig: str | None = typer.Option(
         None, help=f"Rig table: {', '.join(RIG_NAMES)}; guessed if left out. '--rig list' describes them."
     ),
@@ -31,6 +32,7 @@ def import_motion(
     fps: float | None = typer.Option(None, help="True frame rate, where the header is wrong or absent."),
     up_axis: str | None = typer.Option(None, help="Y or Z, overriding the rig's or mapping's."),
     units: str | None = typer.Option(None, help="cm, m, inch or a factor to metres, overriding the rig's or mapping's."),
+    preview: bool = typer.Option(True, help=PREVIEW_HELP),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
     """Import one mocap file to the 22-joint skeleton at 20 fps, Y up, facing +Z, its stance soles on the
@@ -44,12 +46,14 @@ def import_motion(
     if path is None or out is None:
         raise PhysmotionError("import needs a FILE and -o OUT (or --rig list to see the rig tables)")
     _check_out(out, overwrite, MOTION_SUFFIXES)
-    from physmotion.io.export import save_motion
+    _check_preview(out, overwrite)
     from physmotion.io.importer import import_clip
+    from physmotion.render import save_with_preview
 
     motion = import_clip(path, rig=rig, mapping=mapping, asf=asf, fps=fps, up_axis=up_axis, units=units)
-    save_motion(motion, out)
-    console.print(f"wrote {out}: {motion.num_frames} frames, {motion.seconds:.1f} s", highlight=False)
+    files = save_with_preview(motion, out, preview, title=path.name)
+    console.print(f"wrote {' and '.join(map(str, files))}: {motion.num_frames} frames, {motion.seconds:.1f} s",
+                  highlight=False)  # fmt: skip
 
 
 @app.command("export")

@@ -10,8 +10,10 @@ from physmotion.cli._common import (
     CONTROLLER_HELP,
     OVERWRITE_HELP,
     POLICY_HELP,
+    PREVIEW_HELP,
     _as_options,
     _check_out,
+    _check_preview,
     _opt_str,
     _step_bar,
     app,
@@ -28,10 +30,12 @@ EFFORT_HELP = ("With --controller search: 'fast', 'default' or 'best' (more cand
 def project_motion(
     paths: list[Path] = typer.Argument(..., help="Motion .npz files (joints at any fps)."),
     out: Path = typer.Option(..., "-o", "--out", help="Output .npz with the projected motion (or .bvh: the motion "
-                             "alone, without the simulation's records, as `export` writes); with several "
-                             "inputs, a folder that receives <stem>.npz per input (those already there are "
-                             "skipped, so an interrupted run resumes)."),
+                             "alone, without the simulation's records, as `export` writes), with its GIF "
+                             "preview beside it (<stem>.gif); with several inputs, a folder that receives "
+                             "<stem>.npz and <stem>.gif per input (those already there are skipped, so an "
+                             "interrupted run resumes)."),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
+    preview: bool = typer.Option(True, help=PREVIEW_HELP),
     ilc: int = typer.Option(0, "--ilc", help="Iterative learning control: simulate this many more times, "
                             "each time with the root's error of the last fed forward into the reference, and "
                             "keep the simulation closest to the input (0: off; 2: captured runs 50 -> 43 mm "
@@ -61,6 +65,7 @@ def project_motion(
     from physmotion.physics.files import project_file, project_files, teacher_path
     from physmotion.physics.presets import preset
     from physmotion.physics.search import effort as search_effort
+    from physmotion.render import preview_path
 
     if teacher and controller != "search":
         raise PhysmotionError("--teacher needs --controller search: only the search makes teacher records")
@@ -73,9 +78,11 @@ def project_motion(
         _check_out(out, overwrite, MOTION_SUFFIXES)  # written by suffix, as `export` writes
         if teacher:
             _check_out(teacher_path(out), overwrite)
+        _check_preview(out, overwrite)
         with _step_bar(f"projecting {paths[0].name} ({controller}), control steps") as tick:
-            result = project_file(paths[0], out, config, teacher, on_step=tick)
-        console.print(f"wrote {out} ({controller}): {result.summary}", highlight=False)
+            result = project_file(paths[0], out, config, teacher, on_step=tick, preview=preview)
+        shown = f" and its preview {preview_path(out)}" if preview else ""
+        console.print(f"wrote {out}{shown} ({controller}): {result.summary}", highlight=False)
         return
     missing = [p for p in paths if not p.is_file()]
     if missing:
@@ -89,7 +96,7 @@ def project_motion(
         from physmotion.physics.files import outputs_for
 
         for o in outputs_for(paths, out):
-            for f in (o, teacher_path(o)):
+            for f in (o, teacher_path(o), preview_path(o)):
                 f.unlink(missing_ok=True)
     with _step_bar(f"projecting {len(paths)} motions ({controller})") as tick:
         done = []
@@ -99,7 +106,8 @@ def project_motion(
             tick(len(done), len(paths))
             console.print(f"{r.source.name} -> {r.out}: {r.summary}", highlight=False)
 
-        results = project_files(paths, out, config, teacher, workers=workers, ray=ray, on_done=report)
+        results = project_files(paths, out, config, teacher, workers=workers, ray=ray, on_done=report,
+                                preview=preview)
     kept = sum(r.selected for r in results if not r.skipped)
     skipped = sum(r.skipped for r in results)
     console.print(f"wrote {len(results) - skipped} motions to {out} ({controller}): {kept} simulations kept"

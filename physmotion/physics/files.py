@@ -1,8 +1,9 @@
 """P over motion files: one output per input, written atomically, on this machine or on Ray.
 
-What ``physmotion project`` runs. One motion is one task (its projection, its output file and, for the
-search, its teacher records): a task writes its files through a temporary file renamed into place, so a
-killed worker loses that motion only, and a re-run skips the motions whose output is already there.
+What ``physmotion project`` runs. One motion is one task (its projection, its output file, its GIF
+preview of input and output side by side and, for the search, its teacher records): a task writes its
+files through a temporary file renamed into place, so a killed worker loses that motion only, and a re-run
+skips the motions whose output is already there (only drawing the preview where that is missing).
 Tasks run in local worker processes (:mod:`physmotion.physics.workers`) or, with ``ray``, as Ray tasks
 (one CPU each) on a local Ray or a cluster (docs/cluster.md): Ray is an existing engine for this, and
 an optional extra (``pip install physmotion[ray]``).
@@ -17,13 +18,15 @@ from pathlib import Path
 
 from physmotion.errors import PhysmotionError
 from physmotion.physics.projection import ProjectionConfig, project
+from physmotion.render import preview_path
 
 TEACHER_SUFFIX = ".teacher.npz"
 
 
 @dataclass
 class FileResult:
-    """What projecting one file did. ``skipped``: its output existed (a finished motion of an earlier run)."""
+    """What projecting one file did. ``skipped``: its output existed (a finished motion of an earlier run;
+    ``summary`` says whether its missing preview was drawn)."""
 
     source: Path
     out: Path
@@ -40,10 +43,11 @@ def teacher_path(out: Path) -> Path:
 
 
 def project_file(source: str | Path, out: str | Path, config: ProjectionConfig, teacher: bool = False,
-                 on_step: Callable[[int, int], None] | None = None) -> FileResult:  # fmt: skip
+                 on_step: Callable[[int, int], None] | None = None, preview: bool = False) -> FileResult:  # fmt: skip
     """Project the motion in ``source`` (.npz) and write the result to ``out`` (.npz, or .bvh by its suffix;
-    and, with ``teacher`` under the search, its teacher records beside it), atomically. The input kept by
-    imitation selection carries none of the simulation's records."""
+    with ``preview``, a GIF of input and output side by side beside it, :func:`physmotion.render.preview_path`;
+    and, with ``teacher`` under the search, its teacher records beside it), atomically: a failure leaves
+    none of them. The input kept by imitation selection carries none of the simulation's records."""
     from physmotion.metrics.report import help_words
     from physmotion.motion import Motion
 
@@ -59,9 +63,15 @@ def project_file(source: str | Path, out: str | Path, config: ProjectionConfig, 
         from physmotion.physics.search import save_teacher
 
         save_teacher(teacher_path(out), result, motion)
-    from physmotion.io.export import save_motion  # by suffix: .npz (with the records above) or .bvh
+    from physmotion.render import save_with_preview
 
-    save_motion(replace(motion, joints=result.joints, rotations=None, offsets=None, **sim), out)
+    projected = replace(motion, joints=result.joints, rotations=None, offsets=None, **sim)
+    try:  # by suffix: .npz (with the records above) or .bvh; then the preview, the reset frames marked
+        save_with_preview(projected, out, preview, before=motion)
+    except BaseException:
+        if teacher:
+            teacher_path(out).unlink(missing_ok=True)
+        raise
     kept = "simulation kept" if result.selected else "tracking failed: input kept (flagged)"
     if config.ilc_passes:
         kept += f" (pass {int(result.ilc_pass)} of {config.ilc_passes + 1})"
@@ -72,6 +82,15 @@ def project_file(source: str | Path, out: str | Path, config: ProjectionConfig, 
                         result.residual_peak)  # fmt: skip
     summary = f"{kept}; MPJPE mean {mpjpe:.0f} mm, {helped}"
     return FileResult(source, out, bool(result.selected), int(result.resets), mpjpe, summary)
+
+
+def preview_file(source: str | Path, out: str | Path) -> None:
+    """Draw the preview of a projection already on disk (``source`` its input, ``out`` its output), as
+    :func:`project_file` does: for an output of an earlier run written without it."""
+    from physmotion.motion import Motion
+    from physmotion.render import PREVIEW_LABELS, load_motion, preview_path, save_preview
+
+    save_preview(preview_path(out), [Motion.load(source), load_motion(out)], PREVIEW_LABELS)
 
 
 def outputs_for(sources: Sequence[Path], out_dir: Path) -> list[Path]:
@@ -93,8 +112,11 @@ def project_files(
     workers: int = 0,
     ray: str | None = None,
     on_done: Callable[[FileResult], None] | None = None,
+    preview: bool = False,
 ) -> list[FileResult]:
-    """Project every file of ``sources`` into ``out_dir`` (``<stem>.npz``), skipping those already written.
+    """Project every file of ``sources`` into ``out_dir`` (``<stem>.npz``, with ``preview`` its GIF
+    ``<stem>.gif``), skipping those already written: a finished output whose preview is missing gets only
+    its preview drawn.
 
     workers: local processes (0: one per core); ray: a Ray address ("local": start a Ray on this machine)
     to run one task per motion there instead. on_done(result): after each motion, in the order they finish.
@@ -105,10 +127,14 @@ def project_files(
     outs = outputs_for(sources, out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     results: list[FileResult | None] = [None] * len(sources)
-    todo = []
+    todo, drawn = [], []
     for i, (s, o) in enumerate(zip(sources, outs)):
         if o.exists() and (not teacher or teacher_path(o).exists()):
-            results[i] = FileResult(s, o, skipped=True, summary="already written: skipped")
+            if preview and not preview_path(o).exists():  # an output of a run without its preview
+                preview_file(s, o)
+                drawn.append(i)
+            said = "already written: skipped" + (", its missing preview drawn" if i in drawn else "")
+            results[i] = FileResult(s, o, skipped=True, summary=said)
             if on_done is not None:
                 on_done(results[i])
         else:
@@ -117,7 +143,7 @@ def project_files(
     task_config = config
     if config.controller == "search" and not config.search.threads:
         task_config = replace(config, search=replace(config.search, threads=1), workers=1)
-    fn = partial(_task, config=replace(task_config, workers=1), teacher=teacher)
+    fn = partial(_task, config=replace(task_config, workers=1), teacher=teacher, preview=preview)
     jobs = [(sources[i], outs[i]) for i in todo]
     if ray is not None:
         from physmotion.physics.cluster import map_on_ray
@@ -134,9 +160,9 @@ def project_files(
     return [r for r in results if r is not None]
 
 
-def _task(job: tuple[Path, Path], config: ProjectionConfig, teacher: bool) -> FileResult:
+def _task(job: tuple[Path, Path], config: ProjectionConfig, teacher: bool, preview: bool) -> FileResult:
     source, out = job
-    return project_file(source, out, config, teacher)
+    return project_file(source, out, config, teacher, preview=preview)
 
 
-__all__ = ["FileResult", "outputs_for", "project_file", "project_files", "teacher_path"]
+__all__ = ["FileResult", "outputs_for", "preview_file", "project_file", "project_files", "teacher_path"]
