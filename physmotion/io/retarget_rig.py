@@ -355,3 +355,30 @@ def _turn_node(local: np.ndarray, glob: np.ndarray, parents: np.ndarray, node: i
     parent_glob = glob[:, p] if p >= 0 else np.broadcast_to(np.eye(3), turn.shape)
     local[:, node] = np.swapaxes(parent_glob, -1, -2) @ turn @ glob[:, node]
 
+
+
+def error_at_our_proportions(ours: np.ndarray, back: np.ndarray, leg_ratio: float) -> tuple[float, float]:
+    """Mean joint distance (m) between ``ours`` and ``back``, a motion retargeted and imported again, after
+    scaling ``back`` to our proportions; and the heading (degrees) the placement fit turned it by.
+
+    ours, back: (T, 22, 3) metres, Y up. ``back`` is rebuilt with our bone lengths and its own bone
+    directions (:func:`~physmotion.skeleton.inverse_kinematics` onto our rest offsets), its root path
+    divided by ``leg_ratio``; then, since ``import`` puts frame 0 over the origin facing +Z, it is
+    placed on ours by the heading and shift that fit best (least squares, closed form).
+    """
+    from physmotion.skeleton import forward_kinematics, inverse_kinematics, offsets_from_joints
+
+    a = np.asarray(ours, dtype=np.float64)
+    offsets = offsets_from_joints(a)
+    rotations, _ = inverse_kinematics(np.asarray(back, dtype=np.float64), offsets)
+    b = forward_kinematics(rotations, np.asarray(back, dtype=np.float64)[:, 0] / leg_ratio, offsets)
+    pa, pb = a.reshape(-1, 3), b.reshape(-1, 3)
+    ca, cb = pa - pa.mean(0), pb - pb.mean(0)
+    # the yaw about +Y that best turns b's (x, z) onto a's: 2-D Procrustes
+    num = np.sum(cb[:, 2] * ca[:, 0] - cb[:, 0] * ca[:, 2])
+    den = np.sum(cb[:, 0] * ca[:, 0] + cb[:, 2] * ca[:, 2])
+    yaw = float(np.arctan2(num, den))
+    c, s = np.cos(yaw), np.sin(yaw)
+    turn = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    placed = cb @ turn.T + pa.mean(0)
+    return float(np.linalg.norm(placed - pa, axis=-1).mean()), float(np.degrees(yaw))
