@@ -53,6 +53,7 @@ class GenerateConfig:
     physics: PhysicsMode = field(default_factory=PhysicsMode)
     sampler: SamplerConfig = field(default_factory=SamplerConfig)
     seed: int = 0
+    in_place: bool = False  # remove the root's horizontal travel (physmotion.io.in_place; generate --in-place)
     projection: ProjectionConfig = field(default_factory=ProjectionConfig.sampling)  # P for physdiff and post
     morph_projection: ProjectionConfig = field(default_factory=ProjectionConfig)  # P with Morph's selection
 
@@ -129,6 +130,10 @@ def generate(
     sources = [s for s in sources for _ in range(cfg.num)]
     result = pipeline_for(cfg, model)(prompts, lengths, seed=cfg.seed, on_step=on_step)
     result.length_source = sources
+    if cfg.in_place:
+        from physmotion.io.in_place import in_place
+
+        result.motions = [in_place(m) for m in result.motions]
     return result
 
 

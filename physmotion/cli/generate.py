@@ -137,6 +137,8 @@ def generate_cmd(
     controller: str = typer.Option("tracker", help=CONTROLLER_HELP),
     policy: Path | None = typer.Option(None, help=POLICY_HELP),
     preview: bool = typer.Option(True, help="Write a GIF preview per motion."),
+    in_place: bool = typer.Option(False, "--in-place", help="Remove the root's horizontal travel (heading "
+                                  "and height kept), for game loops."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace files of the same names instead of "
                                    "refusing (with --no-preview, an old GIF of the same name is removed)."),
 ) -> None:
@@ -172,6 +174,7 @@ def generate_cmd(
     )
 
     cfg = _with(GenerateConfig(), num=num, physics=physics, seed=seed)
+    cfg.in_place = in_place
     cfg.seconds = seconds  # None: each prompt's length predicted from its text
     cfg = cfg.at_fine_step() if fine_step else cfg
     cfg = cfg.with_controller(controller, _opt_str(policy))

@@ -60,12 +60,52 @@ def import_motion(
 def export_motion(
     path: Path = typer.Argument(..., help="A motion .npz."),
     out: Path = typer.Option(..., "-o", "--out", help="Output .bvh or .npz."),
+    rig_from: Path | None = typer.Option(
+        None, "--rig-from", help="A BVH file of your character's skeleton: the output .bvh has its hierarchy, "
+        "offsets and rest pose, the motion retargeted onto it (stance feet held)."),
+    rig: str | None = typer.Option(None, help=f"With --rig-from: its rig table ({', '.join(RIG_NAMES)}); "
+                                   "guessed if left out."),
+    mapping: Path | None = typer.Option(None, help="With --rig-from: a mapping JSON as `import` takes it."),
+    units: str | None = typer.Option(None, help="With --rig-from: the file's units (cm, m, inch or metres "
+                                     "per unit), overriding the rig's or mapping's."),
+    in_place: bool = typer.Option(False, "--in-place", help="Remove the root's horizontal travel (heading "
+                                  "and height kept)."),
+    loop: bool = typer.Option(False, "--loop", help="Trim to the frames whose first and last poses are "
+                              "closest (searched in the first and last 30 %); prints the pose distance."),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
-    """Write a motion to BVH (metres, Y up, the 22-joint rig) or .npz."""
+    """Write a motion to BVH (metres, Y up, the 22-joint rig, or your skeleton with --rig-from) or .npz."""
     from physmotion.io.export import save_motion
     from physmotion.motion import Motion
 
     _check_out(out, overwrite, MOTION_SUFFIXES)
-    save_motion(Motion.load(path), out)
+    if (rig or mapping or units) and rig_from is None:
+        raise PhysmotionError("--rig, --mapping and --units need --rig-from THEIR.bvh")
+    if rig_from is not None and out.suffix.lower() != ".bvh":
+        raise PhysmotionError(f"--rig-from writes a .bvh, not {out.suffix or out.name!r}")
+    target = None
+    if rig_from is not None:
+        from physmotion.io.retarget_rig import load_target
+
+        target = load_target(rig_from, rig=rig, mapping=mapping, units=units)  # errors before any work
+    motion = Motion.load(path)
+    if loop:
+        from physmotion.io.in_place import best_loop, trim_to_loop
+
+        found = best_loop(motion.joints)
+        motion = trim_to_loop(motion, found)
+        console.print(f"loop: frames {found.start}..{found.end - 1}, pose distance {100 * found.distance:.1f} cm",
+                      highlight=False)  # fmt: skip
+    if in_place:
+        from physmotion.io.in_place import in_place as remove_travel
+
+        motion = remove_travel(motion)
+    if target is not None:
+        from physmotion.io.retarget_rig import save_retargeted_bvh
+
+        result = save_retargeted_bvh(motion, out, target)
+        console.print(f"wrote {out}: {len(target.rest.names)} joints of {rig_from.name} ({target.table.name}), "
+                      f"leg ratio {result.leg_ratio:.2f}", highlight=False)  # fmt: skip
+        return
+    save_motion(motion, out)
     console.print(f"wrote {out}", highlight=False)

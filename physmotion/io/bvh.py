@@ -88,6 +88,35 @@ def bvh_joint_names(path: str | Path) -> tuple[str, ...]:
     return tuple(_parse_hierarchy(tokens, str(path))[0])
 
 
+def read_bvh_rest(path: str | Path) -> RigMotion:
+    """The rest pose of a BVH file's skeleton: one frame, every rotation the identity, every node at its
+    header ``OFFSET`` (the pose a BVH's OFFSETs define, which Blender shows as the armature's rest pose;
+    the motion block is not read). Names and ``is_end`` as :func:`read_bvh`; ``fps`` from the header."""
+    text = read_text(path, "BVH")
+    split = _MOTION.search(text)
+    tokens = (text[: split.start()] if split else text).split()
+    if not tokens or tokens[0] != "HIERARCHY":
+        raise MotionFormatError(f"{path}: not a BVH file (it does not start with HIERARCHY)")
+    names, parents, offsets, _, is_end = _parse_hierarchy(tokens, str(path))
+    fps = None
+    if split is not None:
+        match = _FRAMES.match(text[split.end() :])
+        try:
+            frame_time = float(match.group(2)) if match else 0.0
+        except ValueError:
+            frame_time = 0.0
+        fps = 1.0 / frame_time if frame_time > 0 else None
+    count = len(names)
+    return RigMotion(
+        names=tuple(names),
+        parents=np.array(parents, dtype=int),
+        rotations=np.broadcast_to(np.eye(3), (1, count, 3, 3)).copy(),
+        translations=np.array(offsets, dtype=np.float64)[None],
+        fps=fps,
+        is_end=tuple(is_end),
+    )
+
+
 def parse_bvh(text: str, where: str = "<bvh>", keep: set[str] | None = None) -> RigMotion:
     """Parse BVH text; ``where`` names the source in error messages; ``keep`` as in :func:`read_bvh`."""
     split = _MOTION.search(text)
