@@ -55,10 +55,11 @@ def import_motion(
 @app.command("export")
 def export_motion(
     path: Path = typer.Argument(..., help="A motion .npz."),
-    out: Path = typer.Option(..., "-o", "--out", help="Output .bvh or .npz."),
+    out: Path = typer.Option(..., "-o", "--out", help="Output .bvh, .glb (glTF 2.0 with a skinned body) or .npz."),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
-    """Write a motion to BVH (metres, Y up, the 22-joint rig) or .npz."""
+    """Write a motion to BVH (metres, Y up, the 22-joint rig), glTF binary (.glb: the rig, a skinned capsule
+    body and the animation) or .npz."""
     from physmotion.io.export import save_motion
     from physmotion.motion import Motion
 
