@@ -136,15 +136,17 @@ def test_view_draws_the_skinned_body(mocap_dir: Path, tmp_path: Path) -> None:
     assert glb[:4] == b"glTF"
     colour = data["motions"][0]["colour"]
     found = {}
-    for name, query in (("body", "body=1&sticks=0"), ("sticks", "body=0&sticks=1"), ("none", "body=0&sticks=0")):
+    views = {"body": "body=1&sticks=0", "sticks": "body=0&sticks=1", "none": "body=0&sticks=0"}
+    for name, query in views.items():
         shot = tmp_path / f"{name}.png"
-        _, console = chromium(f"{page.as_uri()}?t=1&follow=0&{query}", tmp_path / f"p{name}", f"--screenshot={shot}")
+        url = f"{page.as_uri()}?t=1&follow=0&{query}"
+        _, console = chromium(url, tmp_path / f"p{name}", f"--screenshot={shot}")
         assert console == [], console
         found[name] = _colour_pixels(shot, colour)
     dom, console = chromium(f"{page.as_uri()}?t=1&follow=0", tmp_path / "pdom", "--dump-dom")
     assert console == [] and 'data-state="ready"' in dom, dom[-2000:]  # ready: the body has loaded
     (c_body, n_body), (c_sticks, n_sticks), (_, n_none) = found["body"], found["sticks"], found["none"]
-    assert n_none < 100, n_none  # with both hidden nothing of the colour is left: what is counted is the figure
+    assert n_none < 100, n_none  # both hidden: nothing of the colour is left, what is counted is the figure
     assert n_body > 3000 and n_body > 2 * n_sticks, (n_body, n_sticks)  # measured: 8740 and 3784
     assert n_sticks > 300, n_sticks  # the sticks are drawn, in the same colour
     assert np.linalg.norm(c_body - c_sticks) < 25, (c_body, c_sticks)  # the body is on the skeleton

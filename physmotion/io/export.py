@@ -1,5 +1,5 @@
-"""Export a Motion: BVH on the 22-joint rig (for Blender and other tools), glTF binary (.glb, physmotion.io.gltf)
-and our .npz."""
+"""Export a Motion: BVH on the 22-joint rig (for Blender and other tools), binary glTF (.glb:
+physmotion.io.gltf) and our .npz."""
 
 from __future__ import annotations
 
@@ -53,4 +53,5 @@ def save_motion(motion: Motion, path: str | Path) -> None:
     elif suffix == ".npz":
         save_npz(motion, path)
     else:
-        raise PhysmotionError(f"{path}: unknown output format {suffix or '(none)'!r}: use {' or '.join(MOTION_SUFFIXES)}")
+        formats = " or ".join(MOTION_SUFFIXES)
+        raise PhysmotionError(f"{path}: unknown output format {suffix or '(none)'!r}: use {formats}")

@@ -162,7 +162,8 @@ def body_mesh(offsets: np.ndarray, config: BodyConfig | None = None) -> BodyMesh
 
 def _quaternions(rotations: np.ndarray) -> np.ndarray:
     """(T, 22, 3, 3) rotation matrices -> (T, 22, 4) unit quaternions (x, y, z, w), glTF's order (spec
-    3.11), each frame's sign chosen nearest the previous frame's so LINEAR interpolation takes the short way."""
+    3.11), each frame's sign chosen nearest the previous frame's so that LINEAR interpolation takes the
+    short way."""
     q = Rotation.from_matrix(rotations.reshape(-1, 3, 3)).as_quat().reshape(*rotations.shape[:2], 4)
     for t in range(1, len(q)):
         flip = np.sum(q[t] * q[t - 1], axis=-1) < 0
@@ -220,7 +221,8 @@ def motion_gltf(motion: Motion, config: BodyConfig | None = None) -> gl.GLTF2:
                                   children=kids or None))  # fmt: skip
     ibm = np.tile(np.eye(4, dtype=np.float32), (NUM_JOINTS, 1, 1))
     ibm[:, :3, 3] = -rest  # the bind pose has no rotation: its inverse is a translation
-    ibm_accessor = blob.add(np.swapaxes(ibm, 1, 2).copy(), gl.MAT4, gl.FLOAT)  # glTF matrices are column-major
+    # glTF matrices are column-major
+    ibm_accessor = blob.add(np.swapaxes(ibm, 1, 2).copy(), gl.MAT4, gl.FLOAT)
     gltf.skins.append(gl.Skin(name="physmotion22", joints=list(range(NUM_JOINTS)), skeleton=0,
                               inverseBindMatrices=ibm_accessor))  # fmt: skip
     n_vert = len(mesh.positions)
@@ -249,12 +251,13 @@ def motion_gltf(motion: Motion, config: BodyConfig | None = None) -> gl.GLTF2:
     for j in range(NUM_JOINTS):
         samplers.append(gl.AnimationSampler(input=time_accessor, interpolation=gl.ANIM_LINEAR,
                                             output=blob.add(quats[:, j], gl.VEC4, gl.FLOAT)))  # fmt: skip
-        channels.append(gl.AnimationChannel(sampler=j, target=gl.AnimationChannelTarget(node=j, path=gl.ROTATION)))
+        target = gl.AnimationChannelTarget(node=j, path=gl.ROTATION)
+        channels.append(gl.AnimationChannel(sampler=j, target=target))
     root = np.asarray(motion.joints[:, 0], dtype=np.float32)
     samplers.append(gl.AnimationSampler(input=time_accessor, interpolation=gl.ANIM_LINEAR,
                                         output=blob.add(root, gl.VEC3, gl.FLOAT)))  # fmt: skip
-    channels.append(gl.AnimationChannel(sampler=NUM_JOINTS,
-                                        target=gl.AnimationChannelTarget(node=0, path=gl.TRANSLATION)))  # fmt: skip
+    target = gl.AnimationChannelTarget(node=0, path=gl.TRANSLATION)
+    channels.append(gl.AnimationChannel(sampler=NUM_JOINTS, target=target))
     name = motion.texts[0] if motion.texts else "motion"
     gltf.animations.append(gl.Animation(name=name, samplers=samplers, channels=channels))
 

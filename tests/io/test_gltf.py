@@ -1,5 +1,5 @@
-"""glTF export (.glb): the Khronos validator finds no error; the file read back (pygltflib) and posed by its own
-node transforms gives the motion's joints within 1 mm; the skinned body sits on the bones; CLI and bad input."""
+"""glTF export (.glb): the Khronos validator finds no error; the file read back (pygltflib) and posed by its
+own node transforms gives the motion's joints within 1 mm; the skinned body sits on the bones; the CLI."""
 
 from __future__ import annotations
 
@@ -42,7 +42,8 @@ def _read(gltf: gl.GLTF2, accessor: int) -> np.ndarray:
     """An accessor's data as (count, components) float64 (FLOAT / UNSIGNED_BYTE / UNSIGNED_SHORT only)."""
     acc = gltf.accessors[accessor]
     view = gltf.bufferViews[acc.bufferView]
-    dtype = {gl.FLOAT: np.float32, gl.UNSIGNED_BYTE: np.uint8, gl.UNSIGNED_SHORT: np.uint16}[acc.componentType]
+    dtypes = {gl.FLOAT: np.float32, gl.UNSIGNED_BYTE: np.uint8, gl.UNSIGNED_SHORT: np.uint16}
+    dtype = dtypes[acc.componentType]
     width = {gl.SCALAR: 1, gl.VEC3: 3, gl.VEC4: 4, gl.MAT4: 16}[acc.type]
     start = view.byteOffset + (acc.byteOffset or 0)
     raw = np.frombuffer(gltf.binary_blob(), dtype=dtype, count=acc.count * width, offset=start)
@@ -119,7 +120,8 @@ def test_a_broken_file_is_caught_by_the_validator_check(walk: Motion, tmp_path: 
     path.write_bytes(b"".join(gltf.save_to_bytes()))
     report = validate(path)
     codes = {m["code"] for m in report["issues"]["messages"]}
-    assert report["issues"]["numErrors"] >= 1 and "ACCESSOR_ANIMATION_SAMPLER_OUTPUT_NON_NORMALIZED_QUATERNION" in codes, report["issues"]
+    assert report["issues"]["numErrors"] >= 1, report["issues"]
+    assert "ACCESSOR_ANIMATION_SAMPLER_OUTPUT_NON_NORMALIZED_QUATERNION" in codes, codes
 
 
 def test_read_back_the_nodes_reproduce_the_joints_within_1mm(walk: Motion, walk_glb: Path) -> None:
