@@ -18,7 +18,7 @@ $(VENV)/.installed: pyproject.toml
 	touch $@
 	@echo "installed: run $(VENV)/bin/physmotion --help"
 
-.PHONY: install demo data test test-fast browser blender render-png
+.PHONY: install demo data test test-fast browser blender gltf-validator render-png
 install: $(VENV)/.installed
 
 demo: $(VENV)/.installed
@@ -41,8 +41,15 @@ browser:
 blender:
 	command -v blender >/dev/null || (apt-get update -qq && apt-get install -y -qq blender)
 
+# tests/io/test_gltf.py validates the .glb files `export` writes with the Khronos glTF validator (npm
+# gltf-validator, Apache-2.0), run by node: install it into .cache/node (ignored by git) where it is missing.
+GLTF_VALIDATOR := .cache/node/node_modules/gltf-validator
+gltf-validator:
+	command -v node >/dev/null || (apt-get update -qq && apt-get install -y -qq nodejs npm)
+	test -f $(GLTF_VALIDATOR)/package.json || npm install --prefix .cache/node --no-audit --no-fund gltf-validator@2.0.0-dev.3.10
+
 # Both tiers (tests/README.md): the fast one and the `slow` one, in 2 workers that build each shared fixture once.
-test: $(VENV)/.installed browser blender
+test: $(VENV)/.installed browser blender gltf-validator
 	$(PY) -m pytest -q -n 2 -m "slow or not slow" --durations=20
 
 # The fast tier alone, as plain `pytest` runs it (at most 3 min on 2 cores); needs no browser.

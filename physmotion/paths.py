@@ -27,9 +27,9 @@ BASE_MODEL = "base"  # the generator trained on the captured data alone, that Mo
 
 # The suffixes of the files physmotion writes: a new output *folder* named like one of them is a mistake
 # (`generate -o walk.npz` would make a folder called walk.npz).
-FILE_SUFFIXES: tuple[str, ...] = (".npz", ".bvh", ".json", ".csv", ".gif", ".mp4", ".png", ".html")
+FILE_SUFFIXES: tuple[str, ...] = (".npz", ".bvh", ".glb", ".json", ".csv", ".gif", ".mp4", ".png", ".html")
 # The motion formats a motion output may take, by suffix (physmotion.io.export.save_motion's).
-MOTION_SUFFIXES: tuple[str, ...] = (".bvh", ".npz")
+MOTION_SUFFIXES: tuple[str, ...] = (".bvh", ".glb", ".npz")
 
 
 class OutputPathError(PhysmotionError):

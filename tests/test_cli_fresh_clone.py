@@ -67,7 +67,7 @@ def test_unknown_output_suffix_is_refused_before_work(command: str, walk_npz: Pa
     source = mocap_dir / BANDAI_WALK if command == "import" else walk_npz
     out = tmp_path / "walk.txt"
     line = one_line_error(invoke(command, source, "-o", out))
-    assert line == f"error: {out}: unknown output format '.txt': use .bvh or .npz"
+    assert line == f"error: {out}: unknown output format '.txt': use .bvh or .glb or .npz"
     assert list(tmp_path.iterdir()) == []
 
 

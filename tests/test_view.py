@@ -1,6 +1,7 @@
 """`physmotion view` in a real browser: the page loads offline in headless Chromium with no console
 message from the page, and shows the figures on the floor, moving with time."""
 
+import base64
 import json
 import re
 import shutil
@@ -69,7 +70,7 @@ def test_view_page_plays_a_walk_in_headless_chromium(mocap_dir: Path, tmp_path: 
     url = page.as_uri()
     dom, console = chromium(url + "?t=0.5&follow=0", tmp_path / "p0", "--dump-dom")
     assert console == []
-    assert re.search(r'<div id="status" data-state="ready" data-frame="10">', dom), dom[-3000:]
+    assert re.search(r'<div id="status" data-state="ready" data-frame="10"[ >]', dom), dom[-3000:]
     assert "0.50 / 9.05 s" in dom
 
     shots = []
@@ -103,3 +104,49 @@ def test_a_broken_page_is_caught(tmp_path: Path) -> None:
     dom, console = chromium(page.as_uri(), tmp_path / "profile", "--dump-dom")
     assert any("Uncaught SyntaxError" in line for line in console), console
     assert 'data-state="error"' in dom
+
+
+def _colour_pixels(path: Path, colour: str) -> tuple[np.ndarray, int]:
+    """Centroid (x, y) and count of the pixels of the 3-D view (legend and control bar left out) whose hue is
+    ``colour``'s (#rrggbb): the figure's, shaded by the lights, not the magenta foot-contact markers."""
+    hsv = np.asarray(Image.open(path).convert("HSV")).astype(int)[90:560]
+    rgb = np.array([[[int(colour[i : i + 2], 16) for i in (1, 3, 5)]]], dtype=np.uint8)
+    hue = int(np.asarray(Image.fromarray(rgb).convert("HSV"))[0, 0, 0])
+    near = np.minimum(np.abs(hsv[..., 0] - hue), 256 - np.abs(hsv[..., 0] - hue)) <= 10
+    mask = near & (hsv[..., 1] > 80) & (hsv[..., 2] > 40)
+    ys, xs = np.nonzero(mask)
+    return np.array([xs.mean(), ys.mean()]) if len(xs) else np.full(2, np.nan), int(mask.sum())
+
+
+@pytest.mark.slow  # headless Chromium (installed by `make test`), four page loads
+def test_view_draws_the_skinned_body(mocap_dir: Path, tmp_path: Path) -> None:
+    """The page's .glb body (GLTFLoader, skinned) is drawn where the sticks are, in the motion's colour,
+    many times their area; body=0 hides it and sticks=1 shows the sticks; no console message."""
+    walk = tmp_path / "walk.npz"
+    res = invoke("import", mocap_dir / BANDAI_WALK, "-o", walk, "--rig", "bandai", "--fps", "30")
+    assert res.returncode == 0, res.stderr
+    page = tmp_path / "view.html"
+    res = invoke("view", walk, "-o", page)
+    assert res.returncode == 0, res.stderr
+    text = page.read_text()
+    data = json.loads(
+        re.search(r'<script id="motion-data" type="application/json">(.*?)</script>', text, re.DOTALL)[1]
+    )
+    glb = base64.b64decode(data["motions"][0]["glb"])
+    assert glb[:4] == b"glTF"
+    colour = data["motions"][0]["colour"]
+    found = {}
+    views = {"body": "body=1&sticks=0", "sticks": "body=0&sticks=1", "none": "body=0&sticks=0"}
+    for name, query in views.items():
+        shot = tmp_path / f"{name}.png"
+        url = f"{page.as_uri()}?t=1&follow=0&{query}"
+        _, console = chromium(url, tmp_path / f"p{name}", f"--screenshot={shot}")
+        assert console == [], console
+        found[name] = _colour_pixels(shot, colour)
+    dom, console = chromium(f"{page.as_uri()}?t=1&follow=0", tmp_path / "pdom", "--dump-dom")
+    assert console == [] and 'data-state="ready"' in dom, dom[-2000:]  # ready: the body has loaded
+    (c_body, n_body), (c_sticks, n_sticks), (_, n_none) = found["body"], found["sticks"], found["none"]
+    assert n_none < 100, n_none  # both hidden: nothing of the colour is left, what is counted is the figure
+    assert n_body > 3000 and n_body > 2 * n_sticks, (n_body, n_sticks)  # measured: 8740 and 3784
+    assert n_sticks > 300, n_sticks  # the sticks are drawn, in the same colour
+    assert np.linalg.norm(c_body - c_sticks) < 25, (c_body, c_sticks)  # the body is on the skeleton

@@ -59,7 +59,7 @@ def import_motion(
 @app.command("export")
 def export_motion(
     path: Path = typer.Argument(..., help="A motion .npz."),
-    out: Path = typer.Option(..., "-o", "--out", help="Output .bvh or .npz."),
+    out: Path = typer.Option(..., "-o", "--out", help="Output .bvh, .glb (glTF 2.0 with a skinned body) or .npz."),
     rig_from: Path | None = typer.Option(
         None, "--rig-from", help="A BVH file of your character's skeleton: the output .bvh has its hierarchy, "
         "offsets and rest pose, the motion retargeted onto it (stance feet held)."),
@@ -74,7 +74,8 @@ def export_motion(
                               "closest (searched in the first and last 30 %); prints the pose distance."),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
-    """Write a motion to BVH (metres, Y up, the 22-joint rig, or your skeleton with --rig-from) or .npz."""
+    """Write a motion to BVH (metres, Y up, the 22-joint rig, or your skeleton with --rig-from), glTF binary
+    (.glb: the rig, a skinned capsule body and the animation) or .npz."""
     from physmotion.io.export import save_motion
     from physmotion.motion import Motion
 

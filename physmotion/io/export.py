@@ -1,4 +1,5 @@
-"""Export a Motion: BVH on the 22-joint rig (for Blender and other tools) and our .npz."""
+"""Export a Motion: BVH on the 22-joint rig (for Blender and other tools), binary glTF (.glb:
+physmotion.io.gltf) and our .npz."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from physmotion.errors import PhysmotionError
 from physmotion.io.bvh import WRITE_ORDER, write_bvh
 from physmotion.io.rigs import RigMotion
 from physmotion.motion import Motion
+from physmotion.paths import MOTION_SUFFIXES
 from physmotion.skeleton import JOINT_NAMES, PARENTS, inverse_kinematics, offsets_from_joints
 
 
@@ -40,11 +42,16 @@ def save_npz(motion: Motion, path: str | Path) -> None:
 
 
 def save_motion(motion: Motion, path: str | Path) -> None:
-    """Write ``motion`` in the format its suffix names: ``.bvh`` or ``.npz``."""
+    """Write ``motion`` in the format its suffix names: ``.bvh``, ``.glb`` or ``.npz``."""
     suffix = Path(path).suffix.lower()
     if suffix == ".bvh":
         save_bvh(motion, path)
+    elif suffix == ".glb":
+        from physmotion.io.gltf import save_glb  # pygltflib is imported only for a .glb
+
+        save_glb(motion, path)
     elif suffix == ".npz":
         save_npz(motion, path)
     else:
-        raise PhysmotionError(f"{path}: unknown output format {suffix or '(none)'!r}: use .bvh or .npz")
+        formats = " or ".join(MOTION_SUFFIXES)
+        raise PhysmotionError(f"{path}: unknown output format {suffix or '(none)'!r}: use {formats}")

@@ -2,17 +2,21 @@
 
 The page inlines everything it needs, so it opens from disk with no network: the vendored three.js
 bundle (``vendor/``, see its README), the viewer script (``viewer.js``) and the motions as JSON (joints
-in integer millimetres per frame, foot contacts as a 4-bit mask per frame). Motions are loaded, labelled
-and brought to one rate and length exactly as ``physmotion render`` does (:mod:`physmotion.render`), and
-placed side by side along X so that they do not overlap.
+in integer millimetres per frame, foot contacts as a 4-bit mask per frame, and each motion's skinned body
+as the .glb that ``export`` writes, base64, parsed by three.js' GLTFLoader in the page). Motions are
+loaded, labelled and brought to one rate and length exactly as ``physmotion render`` does
+(:mod:`physmotion.render`), and placed side by side along X so that they do not overlap.
 
 Page URL parameters (also for tests): ``?t=SECONDS`` shows that time, paused; ``follow=0`` keeps the
-camera where it starts instead of following the motions. ``window.physmotionViewer`` exposes
-``setTime(s)``, ``play()``, ``pause()`` and ``state()``.
+camera where it starts instead of following the motions; ``body=0`` hides the skinned bodies and
+``sticks=1`` shows the stick figures (by default the bodies are shown and, of the sticks, only the
+foot-contact markers; the page's "body" and "sticks" boxes toggle them). ``window.physmotionViewer``
+exposes ``setTime(s)``, ``play()``, ``pause()`` and ``state()``.
 """
 
 from __future__ import annotations
 
+import base64
 import html
 import json
 import re
@@ -24,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from physmotion.errors import PhysmotionError
-from physmotion.motion import write_atomic
+from physmotion.motion import Motion, write_atomic
 from physmotion.render import Track, load_motion, make_tracks, short_labels
 from physmotion.skeleton import FOOT_JOINTS, JOINT_NAMES, PARENTS
 
@@ -57,7 +61,10 @@ def lateral_offsets(tracks: Sequence[Track]) -> np.ndarray:
 def scene_data(tracks: Sequence[Track], fps: float) -> dict:
     """The page's JSON: skeleton, rate, and per motion its label, colour, X offset, joints (N * 22 * 3
     integers, mm, frame-major), contacts (N integers, bit i = FOOT_JOINTS[i] touching the floor) and
-    not_simulated (the indices of the frames P did not simulate: ``Track.not_simulated``)."""
+    not_simulated (the indices of the frames P did not simulate: ``Track.not_simulated``) and glb (base64 of
+    the motion's .glb at the common rate, without the X offset: :func:`physmotion.io.gltf.glb_bytes`)."""
+    from physmotion.io.gltf import glb_bytes
+
     offsets = lateral_offsets(tracks)
     motions = []
     for track, dx in zip(tracks, offsets):
@@ -70,6 +77,7 @@ def scene_data(tracks: Sequence[Track], fps: float) -> dict:
             "joints": mm.reshape(-1).tolist(),
             "contacts": bits.tolist(),
             "not_simulated": [] if track.not_simulated is None else np.flatnonzero(track.not_simulated).tolist(),
+            "glb": base64.b64encode(glb_bytes(Motion(joints=track.joints, fps=fps))).decode("ascii"),
         })  # fmt: skip
     return {
         "fps": fps,

@@ -106,6 +106,33 @@
     scene.add(m.group);
   }
 
+  // One skinned body per motion: its .glb (physmotion/io/gltf.py: capsules bound to the 22 joints, the motion
+  // as a glTF animation at the page's rate) parsed by GLTFLoader, played by an AnimationMixer set to each
+  // shown frame's time, moved along X by the motion's offset and drawn in its colour.
+  const bodyBox = document.getElementById("body");
+  const sticksBox = document.getElementById("sticks");
+  function base64Bytes(text) {
+    const raw = atob(text);
+    const bytes = new Uint8Array(raw.length);
+    for (let i = 0; i < raw.length; i++) bytes[i] = raw.charCodeAt(i);
+    return bytes.buffer;
+  }
+  const loader = new THREE.GLTFLoader();
+  const bodies = Promise.all(motions.map((m) => loader.parseAsync(base64Bytes(m.glb), "").then((gltf) => {
+    const material = new THREE.MeshLambertMaterial({ color: new THREE.Color(m.colour) });
+    gltf.scene.traverse((o) => {
+      if (o.isSkinnedMesh) {
+        o.material = material;
+        o.frustumCulled = false; // its bounds are those of the bind pose, not of where the motion has gone
+      }
+    });
+    gltf.scene.position.x = m.offset;
+    m.body = gltf.scene;
+    m.mixer = new THREE.AnimationMixer(gltf.scene);
+    m.mixer.clipAction(gltf.animations[0]).play();
+    scene.add(gltf.scene);
+  })));
+
   const legend = document.getElementById("legend");
   for (const m of motions) {
     const row = document.createElement("div");
@@ -122,7 +149,13 @@
 
   function pose(f) {
     for (const m of motions) {
+      if (m.mixer) {
+        m.mixer.setTime(f / fps); // a keyframe's time: the body takes that frame's pose exactly
+        m.body.visible = bodyBox.checked;
+      }
       for (let j = 0; j < J; j++) joint(m, f, j, m.spheres[j].position);
+      for (const s of m.spheres) s.visible = sticksBox.checked;
+      for (const [, c] of m.bones) c.visible = sticksBox.checked;
       for (const [j, c] of m.bones) {
         joint(m, f, parents[j], a);
         joint(m, f, j, b);
@@ -135,7 +168,8 @@
       data.foot_joints.forEach((j, i) => {
         const touching = (m.contacts[f] >> i) & 1;
         m.spheres[j].material = touching ? contactMaterial : m.material;
-        m.spheres[j].scale.setScalar(touching ? 0.045 : 0.03);
+        m.spheres[j].scale.setScalar(touching ? (bodyBox.checked ? 0.055 : 0.045) : 0.03);
+        if (touching) m.spheres[j].visible = true; // foot contacts are marked with or without the sticks
       });
     }
   }
@@ -217,9 +251,12 @@
     time = Number(scrub.value) / fps;
   });
   follow.addEventListener("change", () => followed.copy(rootCentre(frameAt(time), new THREE.Vector3())));
+  for (const box of [bodyBox, sticksBox]) box.addEventListener("change", () => { shown = -1; });
 
   const params = new URLSearchParams(window.location.search);
   follow.checked = params.get("follow") !== "0";
+  bodyBox.checked = params.get("body") !== "0";
+  sticksBox.checked = params.get("sticks") === "1";
   if (params.has("t")) {
     time = Math.min(duration, Math.max(0, Number(params.get("t")) || 0));
     setPlaying(false);
@@ -242,8 +279,14 @@
     pause() { setPlaying(false); },
     state() { return { time, frame: frameAt(time), frames, fps, playing }; },
   };
+  // Ready once every body is loaded (parsing is asynchronous); the sticks play meanwhile.
   show(frameAt(time));
   renderer.render(scene, camera);
-  if (status.dataset.state === "loading") status.dataset.state = "ready";
   requestAnimationFrame(tick);
+  bodies.then(() => {
+    shown = -1;
+    show(frameAt(time));
+    renderer.render(scene, camera);
+    if (status.dataset.state === "loading") status.dataset.state = "ready";
+  }, (e) => fail("a body could not be loaded: " + (e && e.message ? e.message : String(e))));
 })();
