@@ -24,13 +24,16 @@ SWAP = [ACTIVATION_CHANNELS.index(c.replace("left", "@").replace("right", "left"
 
 @pytest.fixture(scope="module")
 def clips(mocap_dir: Path) -> dict[str, np.ndarray]:
-    """clip -> joints (T, 22, 3) at 20 fps."""
+    """clip -> joints (T, 22, 3) at 20 fps, in the data convention ``activations`` takes (the clip's lowest
+    joint at y = 0, as the dataset build gives it), not the importer's surface floor."""
+    from physmotion.diffusion.physdiff import on_data_floor
+
     infos = {c.clip: c for c in load_manifest(mocap_dir)}
     out = {}
     for clip in (WALK, RUN):
         motion = import_clip(infos[clip])
         assert motion.fps == 20
-        out[clip] = motion.joints
+        out[clip] = on_data_floor(motion.joints)
     return out
 
 
