@@ -39,7 +39,7 @@ browser:
 # tests/test_blender.py imports our exports in headless Blender (Debian's blender, 3.4.1 on bookworm;
 # about a minute to install): install it where it is missing.
 blender:
-	command -v blender >/dev/null || (apt-get update -qq && apt-get install -y -qq blender)
+	command -v blender >/dev/null && python3 -c 'import numpy' 2>/dev/null || (apt-get update -qq && apt-get install -y -qq blender python3-numpy)
 
 # tests/io/test_gltf.py validates the .glb files `export` writes with the Khronos glTF validator (npm
 # gltf-validator, Apache-2.0), run by node: install it into .cache/node (ignored by git) where it is missing.

@@ -25,6 +25,17 @@ import io_anim_bvh.import_bvh as _import_bvh  # noqa: E402
 
 _import_bvh.open = lambda file, mode="r", *a, **k: builtins.open(file, mode.replace("U", ""), *a, **k)
 
+# Its glTF importer needs numpy (Debian's python3-numpy, installed beside blender by `make blender`) and
+# still spells numpy's bool np.bool (io_scene_gltf2/blender/imp/gltf2_blender_mesh.py, set_poly_smoothing),
+# an alias numpy 1.24 removed ("NumPy 1.24 Release Notes", expired deprecations): restore that alias.
+try:
+    import numpy as _np  # noqa: E402
+
+    if "bool" not in _np.__dict__:
+        _np.bool = bool
+except ImportError:  # the BVH importer does without numpy
+    pass
+
 scene = bpy.context.scene
 before = set(bpy.data.objects)
 exec(request["importer"], {"bpy": bpy, "path": request["path"]})

@@ -3,10 +3,9 @@
 count, frame rate and the feet's positions at a few frames are checked against the motion we exported.
 
 Each format is one entry of :data:`FORMATS`: the ``export`` options that write it, the Python that
-imports it in Blender, and what Blender should then hold. A retargeted BVH (``export --rig-from``) or a
-``.glb`` is one more entry (its importer ``bpy.ops.import_scene.gltf(filepath=path)``, after setting
-``bpy.context.scene.render.fps`` to the motion's rate: glTF keeps times in seconds, Blender's importer
-places keys at the scene's rate).
+imports it in Blender, and what Blender should then hold: our BVH, a BVH retargeted onto a Mixamo-named
+rig of other proportions (``export --rig-from``) and the ``.glb`` (glTF keeps times in seconds; Blender's
+importer places one key a frame at the scene's rate, set to the motion's first, from frame 0).
 """
 
 from __future__ import annotations
@@ -34,17 +33,20 @@ FOOT_CM = 1.0  # Blender's foot positions against ours, in cm
 class Format:
     """An export format as Blender opens it.
 
-    export: options of ``physmotion export`` after ``-o FILE``; importer: Python run in Blender with
-    ``bpy`` and ``path``; bones: the armature's bone count; feet: bone name -> our joint (index into the
-    motion's joints) at that bone's head; same_skeleton: the bones have our lengths, so the whole head
-    position is checked (else only its height: another rig's proportions)."""
+    export: options of ``physmotion export`` after ``-o FILE`` ("{rig}": the Mixamo-named rig's BVH);
+    importer: Python run in Blender with ``bpy`` and ``path`` ("{fps}": the motion's rate); bones: the
+    armature's bone count (None: the rig file's joints); feet: bone name -> our joint (index into the
+    motion's joints) at that bone's head; same_skeleton: the bones have our lengths, so the head is
+    checked against our joint (else, on another rig's proportions, against that bone's position in the
+    file as physmotion's own BVH reader computes it, in metres); first: the action's first frame."""
 
     suffix: str
     export: tuple[str, ...]
     importer: str
-    bones: int
+    bones: int | None
     feet: dict[str, int]
     same_skeleton: bool = True
+    first: int = 1
 
 
 # Our BVH is Y up, facing +Z (physmotion.io.export.save_bvh): the importer's axis_forward -Z, axis_up Y turn
@@ -52,9 +54,16 @@ class Format:
 # (io_anim_bvh/import_bvh.py, load: with it use_fps_scale is turned off).
 BVH_IMPORT = ("bpy.ops.import_anim.bvh(filepath=path, axis_forward='-Z', axis_up='Y', global_scale=1.0, "
               "update_scene_fps=True, update_scene_duration=True)")  # fmt: skip
+GLB_IMPORT = "bpy.context.scene.render.fps = {fps}\nbpy.ops.import_scene.gltf(filepath=path)"
+FEET = {"left_foot": 10, "right_foot": 11}
 FORMATS = [
-    pytest.param(Format(".bvh", (), BVH_IMPORT, 22, {"left_foot": 10, "right_foot": 11}), id="bvh"),
-    # the retargeted BVH (export --rig-from) and the .glb go here, one entry each
+    pytest.param(Format(".bvh", (), BVH_IMPORT, 22, FEET), id="bvh"),
+    # the rig's BVH is in centimetres, as Mixamo's: Blender scales it to metres on import
+    pytest.param(Format(".bvh", ("--rig-from", "{rig}", "--rig", "mixamo"),
+                        BVH_IMPORT.replace("global_scale=1.0", "global_scale=0.01"), None,
+                        {"mixamorig:LeftToeBase": 10, "mixamorig:RightToeBase": 11}, same_skeleton=False),
+                 id="bvh-on-a-mixamo-rig"),
+    pytest.param(Format(".glb", (), GLB_IMPORT, 22, FEET, first=0), id="glb"),
 ]
 
 
@@ -90,29 +99,45 @@ def generated(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return next(folder.glob("*.npz"))
 
 
+@pytest.fixture(scope="module")
+def mixamo_rig(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A Mixamo-named rig of other proportions, T-pose rest, in cm (experiments/retarget_rigs.py's)."""
+    from experiments.retarget_rigs import mixamo_rig_bvh
+
+    path = tmp_path_factory.mktemp("rig") / "mixamo.bvh"
+    mixamo_rig_bvh(path)
+    return path
+
+
 @pytest.mark.parametrize("source", ["captured", "generated"])
 @pytest.mark.parametrize("fmt", FORMATS)
 def test_blender_opens_the_export(fmt: Format, source: str, request: pytest.FixtureRequest, tmp_path: Path) -> None:
     npz = request.getfixturevalue(source)
     motion = Motion.load(npz)
     out = tmp_path / f"motion{fmt.suffix}"
-    res = invoke("export", npz, "-o", out, *fmt.export)
+    rig = request.getfixturevalue("mixamo_rig") if "{rig}" in fmt.export else None
+    res = invoke("export", npz, "-o", out, *(str(rig) if a == "{rig}" else a for a in fmt.export))
     assert res.returncode == 0, res.stderr
     n = motion.num_frames
-    frames = [0, n // 3, n // 2, n - 1]
-    got = blender({"path": str(out), "importer": fmt.importer, "bones": list(fmt.feet), "frames": frames},
-                  tmp_path)  # fmt: skip
-    assert got["bones"] == fmt.bones
+    frames = list(range(0, n, 5))
+    importer = fmt.importer.replace("{fps}", str(int(round(motion.fps))))  # Blender's fps is an int
+    got = blender({"path": str(out), "importer": importer, "bones": list(fmt.feet), "frames": frames}, tmp_path)
+    bones = fmt.bones if fmt.bones is not None else sum(
+        line.split()[0] in ("ROOT", "JOINT") for line in out.read_text().splitlines())  # fmt: skip
+    assert got["bones"] == bones
     assert got["fps"] == pytest.approx(motion.fps)
     first, last = got["frame_range"]
-    assert (first, last - first + 1, got["keyframes"]) == (1, n, n)  # one key per frame, from frame 1
+    assert (first, last - first + 1, got["keyframes"]) == (fmt.first, n, n)  # one key per frame
     for bone, joint in fmt.feet.items():
         ours = motion.joints[frames, joint]
         theirs = np.asarray(got["heads"][bone])
-        error_cm = 100 * (np.linalg.norm(theirs - ours, axis=-1) if fmt.same_skeleton else
-                          np.abs(theirs[:, 1] - ours[:, 1]))  # fmt: skip
+        if not fmt.same_skeleton:  # the retargeted file's own bone, by our reader (centimetres, Y up)
+            from physmotion.io.bvh import read_bvh
+
+            rig = read_bvh(out)
+            ours = 0.01 * rig.forward_kinematics()[frames, rig.index(bone)]
+        error_cm = 100 * np.linalg.norm(theirs - ours, axis=-1)
         assert error_cm.max() <= FOOT_CM, (bone, error_cm)
-        assert np.abs(theirs[:, 1] - ours[:, 1]).max() * 100 <= FOOT_CM  # the height, in any case
 
 
 def test_blender_plays_the_bvh_at_its_frame_time(captured: Path, tmp_path: Path) -> None:
