@@ -76,37 +76,9 @@ def export_motion(
 ) -> None:
     """Write a motion to BVH (metres, Y up, the 22-joint rig, or your skeleton with --rig-from), glTF binary
     (.glb: the rig, a skinned capsule body and the animation) or .npz."""
-    from physmotion.io.export import save_motion
-    from physmotion.motion import Motion
+    from physmotion.io.export import export_file
 
     _check_out(out, overwrite, MOTION_SUFFIXES)
-    if (rig or mapping or units) and rig_from is None:
-        raise PhysmotionError("--rig, --mapping and --units need --rig-from THEIR.bvh")
-    if rig_from is not None and out.suffix.lower() != ".bvh":
-        raise PhysmotionError(f"--rig-from writes a .bvh, not {out.suffix or out.name!r}")
-    target = None
-    if rig_from is not None:
-        from physmotion.io.retarget_rig import load_target
-
-        target = load_target(rig_from, rig=rig, mapping=mapping, units=units)  # errors before any work
-    motion = Motion.load(path)
-    if loop:
-        from physmotion.io.in_place import best_loop, trim_to_loop
-
-        found = best_loop(motion.joints)
-        motion = trim_to_loop(motion, found)
-        console.print(f"loop: frames {found.start}..{found.end - 1}, pose distance {100 * found.distance:.1f} cm",
-                      highlight=False)  # fmt: skip
-    if in_place:
-        from physmotion.io.in_place import in_place as remove_travel
-
-        motion = remove_travel(motion)
-    if target is not None:
-        from physmotion.io.retarget_rig import save_retargeted_bvh
-
-        result = save_retargeted_bvh(motion, out, target)
-        console.print(f"wrote {out}: {len(target.rest.names)} joints of {rig_from.name} ({target.table.name}), "
-                      f"leg ratio {result.leg_ratio:.2f}", highlight=False)  # fmt: skip
-        return
-    save_motion(motion, out)
-    console.print(f"wrote {out}", highlight=False)
+    for line in export_file(path, out, rig_from=rig_from, rig=rig, mapping=mapping, units=units, in_place=in_place,
+                            loop=loop):  # fmt: skip
+        console.print(line, highlight=False)

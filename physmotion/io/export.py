@@ -55,3 +55,40 @@ def save_motion(motion: Motion, path: str | Path) -> None:
     else:
         formats = " or ".join(MOTION_SUFFIXES)
         raise PhysmotionError(f"{path}: unknown output format {suffix or '(none)'!r}: use {formats}")
+
+
+def export_file(source: str | Path, out: str | Path, *, rig_from: str | Path | None = None, rig: str | None = None,
+                mapping: str | Path | None = None, units: str | None = None, in_place: bool = False,
+                loop: bool = False) -> list[str]:  # fmt: skip
+    """``physmotion export``: the motion in ``source`` (.npz) written to ``out`` by its suffix, optionally
+    trimmed to its best loop (``loop``), without its horizontal travel (``in_place``) and retargeted onto
+    the skeleton of the BVH ``rig_from`` (its rig table ``rig`` or ``mapping``, ``units``; the output must
+    then be a .bvh). Every option is checked before the motion is read. Returns the lines to report."""
+    from physmotion.io.in_place import best_loop, trim_to_loop
+    from physmotion.io.in_place import in_place as remove_travel
+
+    out = Path(out)
+    if (rig or mapping or units) and rig_from is None:
+        raise PhysmotionError("--rig, --mapping and --units need --rig-from THEIR.bvh")
+    if rig_from is not None and out.suffix.lower() != ".bvh":
+        raise PhysmotionError(f"--rig-from writes a .bvh, not {out.suffix or out.name!r}")
+    target = None
+    if rig_from is not None:
+        from physmotion.io.retarget_rig import load_target
+
+        target = load_target(rig_from, rig=rig, mapping=mapping, units=units)
+    motion, lines = Motion.load(source), []
+    if loop:
+        found = best_loop(motion.joints)
+        motion = trim_to_loop(motion, found)
+        lines.append(f"loop: frames {found.start}..{found.end - 1}, pose distance {100 * found.distance:.1f} cm")
+    if in_place:
+        motion = remove_travel(motion)
+    if target is None:
+        save_motion(motion, out)
+        return [*lines, f"wrote {out}"]
+    from physmotion.io.retarget_rig import save_retargeted_bvh
+
+    result = save_retargeted_bvh(motion, out, target)
+    return [*lines, f"wrote {out}: {len(target.rest.names)} joints of {Path(rig_from).name} ({target.table.name}), "
+                    f"leg ratio {result.leg_ratio:.2f}"]  # fmt: skip

@@ -156,3 +156,24 @@ def test_generate_in_place(tmp_path: Path) -> None:
 
     motion = generate(["a person walks forward"], GenerateConfig(num=1, seed=0, seconds=2, physics="none", in_place=True)).motions[0]
     assert horizontal_travel(motion.joints) <= 0.01
+
+
+def test_export_file_is_what_the_command_runs(walk: Motion, tmp_path: Path) -> None:
+    """The library function behind `export`: options checked before the motion is read (a missing source
+    is not reached), the loop reported, the travel removed, the retarget onto their rig written."""
+    from physmotion.errors import PhysmotionError
+    from physmotion.io.export import export_file
+
+    with pytest.raises(PhysmotionError, match="need --rig-from"):
+        export_file(tmp_path / "missing.npz", tmp_path / "x.bvh", rig="mixamo")
+    with pytest.raises(PhysmotionError, match="writes a .bvh"):
+        export_file(tmp_path / "missing.npz", tmp_path / "x.glb", rig_from=tmp_path / "rig.bvh")
+    src, rig = tmp_path / "walk.npz", tmp_path / "mixamo.bvh"
+    walk.save(src)
+    mixamo_rig_bvh(rig)
+    lines = export_file(src, tmp_path / "out.bvh", rig_from=rig, rig="mixamo", in_place=True, loop=True)
+    assert lines[0].startswith("loop: frames ") and "joints of mixamo.bvh" in lines[-1]
+    assert read_bvh(tmp_path / "out.bvh").names == read_bvh_rest(rig).names
+    plain = export_file(src, tmp_path / "plain.npz", in_place=True)
+    assert plain == [f"wrote {tmp_path / 'plain.npz'}"]
+    assert horizontal_travel(Motion.load(tmp_path / "plain.npz").joints) <= 0.01
