@@ -165,7 +165,7 @@ def facing_direction(joints: np.ndarray) -> np.ndarray:
 # frame, as HumanML3D's IK does, so bone twist is not recovered (positions are).
 
 
-def _kabsch(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+def kabsch(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     """Rotations R (..., 3, 3) minimising sum |R src_k - dst_k|^2; src, dst: (..., K, 3)."""
     h = np.swapaxes(src, -1, -2) @ dst
     u, _, vt = np.linalg.svd(h)
@@ -217,7 +217,7 @@ def offsets_from_joints(joints: np.ndarray) -> np.ndarray:
         if len(kids) < 2:
             continue
         vec = joints[:, kids] - joints[:, j : j + 1]  # (T, K, 3)
-        frame = _kabsch(np.broadcast_to(REST_OFFSETS[kids], vec.shape), vec)  # (T, 3, 3)
+        frame = kabsch(np.broadcast_to(REST_OFFSETS[kids], vec.shape), vec)  # (T, 3, 3)
         local = np.einsum("tji,tkj->tki", frame, vec)  # R^T v, in the joint's own frame
         offsets[kids] = np.median(local, axis=0)
     return offsets
@@ -241,7 +241,7 @@ def inverse_kinematics(joints: np.ndarray, offsets: np.ndarray | None = None) ->
         kids = children(j)
         if len(kids) >= 2:
             vec = joints[:, kids] - joints[:, j : j + 1]
-            glob[:, j] = _kabsch(np.broadcast_to(offsets[kids], vec.shape), vec)
+            glob[:, j] = kabsch(np.broadcast_to(offsets[kids], vec.shape), vec)
         elif len(kids) == 1:
             rest_dir = unit_vectors(np.einsum("tij,j->ti", parent_rot, offsets[kids[0]]))
             dir_now = unit_vectors(joints[:, kids[0]] - joints[:, j])

@@ -46,8 +46,9 @@ from physmotion.skeleton import (
 )
 
 # Z-up -> Y-up is a -90 degree turn about X: (x, y, z) -> (x, z, -y); X-up -> Y-up a +90 degree
-# turn about Z: (x, y, z) -> (-y, x, z). Both are proper rotations, so no mirroring.
-_TO_Y_UP = {
+# turn about Z: (x, y, z) -> (-y, x, z). Both are proper rotations, so no mirroring. Public: the export
+# onto a user's rig (io/retarget_rig.py) turns our axes into the file's with the same table.
+TO_Y_UP = {
     "Y": np.eye(3),
     "Z": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]),
     "X": np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
@@ -106,7 +107,7 @@ def canonicalize(
     (the stance soles on y = 0) or :data:`~physmotion.io.floor.FRAME0` (the rule before, for P's input);
     neither applies to a ``table.placed`` rig, whose files keep their placement.
     """
-    if up_axis not in _TO_Y_UP:
+    if up_axis not in TO_Y_UP:
         raise PhysmotionError(f"up axis must be one of X, Y, Z, got {up_axis!r}")
     if floor not in IMPORT_FLOORS:
         raise PhysmotionError(f"floor must be one of {', '.join(IMPORT_FLOORS)}, got {floor!r}")
@@ -120,7 +121,7 @@ def canonicalize(
         )
     rig = rig.subset(table.nodes())
     weights = table.weights(rig.names)
-    to_world = _TO_Y_UP[up_axis] * units
+    to_world = TO_Y_UP[up_axis] * units
 
     def smpl_points(r: RigMotion) -> np.ndarray:
         return np.einsum("ij,tjk,lk->til", weights, r.forward_kinematics(), to_world)

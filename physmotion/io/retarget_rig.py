@@ -39,7 +39,7 @@ import numpy as np
 
 from physmotion.errors import PhysmotionError
 from physmotion.io.bvh import WRITE_ORDER, read_bvh_rest, write_bvh
-from physmotion.io.canonical import _TO_Y_UP
+from physmotion.io.canonical import TO_Y_UP
 from physmotion.io.mapping import load_mapping
 from physmotion.io.rigs import RIGS, JointSource, RigMotion, RigTable, parse_units, table_from_mapping
 from physmotion.motion import Motion
@@ -47,9 +47,9 @@ from physmotion.skeleton import (
     JOINT_INDEX,
     JOINT_NAMES,
     NUM_JOINTS,
-    _kabsch,
     bone_lengths,
     children,
+    kabsch,
     swing_rotation,
     unit_vectors,
 )
@@ -136,7 +136,7 @@ def load_target(
     if metres is None:
         raise PhysmotionError(f"{path}: units unknown for rig {table.name!r}: give --units (e.g. cm)")
     up = (up_axis or table.up_axis or "Y").upper()
-    if up not in _TO_Y_UP:
+    if up not in TO_Y_UP:
         raise PhysmotionError(f"up axis must be one of X, Y, Z, got {up_axis!r}")
     return TargetRig(rest=rest, table=table, units=float(metres), up_axis=up, path=path)
 
@@ -155,7 +155,7 @@ def retarget(motion: Motion, target: TargetRig, config: RetargetConfig | None = 
     n = ours.shape[0]
     rest = target.rest
     j_count = len(rest.names)
-    turn = _TO_Y_UP[target.up_axis]  # file axes -> ours (a proper rotation)
+    turn = TO_Y_UP[target.up_axis]  # file axes -> ours (a proper rotation)
     offsets = rest.translations[0] @ turn.T * target.units  # (J, 3) metres, our axes
     parents = np.asarray(rest.parents)
     weights = target.table.weights(rest.names)  # (22, J): our joints = weights @ node positions
@@ -177,7 +177,7 @@ def retarget(motion: Motion, target: TargetRig, config: RetargetConfig | None = 
             new = swing_rotation(unit_vectors(now[:, 0]), want[:, 0]) @ glob[:, a]
         else:
             in_node = np.einsum("tji,tkj->tki", glob[:, a], now)  # G^T v: the vectors in the node's frame
-            new = _kabsch(unit_vectors(in_node), want)
+            new = kabsch(unit_vectors(in_node), want)
         parent_glob = glob[:, parents[a]] if parents[a] >= 0 else np.broadcast_to(np.eye(3), (n, 3, 3))
         local[:, a] = np.swapaxes(parent_glob, -1, -2) @ new
 
