@@ -47,14 +47,21 @@ def _figure_centre(path: Path) -> tuple[np.ndarray, int]:
     return np.array([xs.mean(), ys.mean()]), int(coloured.sum())
 
 
-@pytest.mark.slow  # headless Chromium (installed by `make test`), three page loads
-def test_view_page_plays_a_walk_in_headless_chromium(mocap_dir: Path, tmp_path: Path) -> None:
-    walk = tmp_path / "walk.npz"
-    res = invoke("import", mocap_dir / BANDAI_WALK, "-o", walk, "--rig", "bandai", "--fps", "30")
+@pytest.fixture(scope="module")
+def walk_page(mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """The Bandai walk imported at its true 30 fps and `physmotion view`'s page of it: (walk.npz, view.html)."""
+    folder = tmp_path_factory.mktemp("view")
+    walk, page = folder / "walk.npz", folder / "view.html"
+    res = invoke("import", mocap_dir / BANDAI_WALK, "-o", walk, "--rig", "bandai", "--fps", "30", "--no-preview")
     assert res.returncode == 0, res.stderr
-    page = tmp_path / "view.html"
     res = invoke("view", walk, "-o", page)
     assert res.returncode == 0, res.stderr
+    return walk, page
+
+
+@pytest.mark.slow  # headless Chromium (installed by `make test`), three page loads
+def test_view_page_plays_a_walk_in_headless_chromium(walk_page: tuple[Path, Path], tmp_path: Path) -> None:
+    walk, page = walk_page
     text = page.read_text()
     # Self-contained: no external script, style or fetch.
     assert not re.search(r"<(script|link|img)[^>]+(src|href)=", text)
@@ -119,15 +126,10 @@ def _colour_pixels(path: Path, colour: str) -> tuple[np.ndarray, int]:
 
 
 @pytest.mark.slow  # headless Chromium (installed by `make test`), four page loads
-def test_view_draws_the_skinned_body(mocap_dir: Path, tmp_path: Path) -> None:
+def test_view_draws_the_skinned_body(walk_page: tuple[Path, Path], tmp_path: Path) -> None:
     """The page's .glb body (GLTFLoader, skinned) is drawn where the sticks are, in the motion's colour,
     many times their area; body=0 hides it and sticks=1 shows the sticks; no console message."""
-    walk = tmp_path / "walk.npz"
-    res = invoke("import", mocap_dir / BANDAI_WALK, "-o", walk, "--rig", "bandai", "--fps", "30")
-    assert res.returncode == 0, res.stderr
-    page = tmp_path / "view.html"
-    res = invoke("view", walk, "-o", page)
-    assert res.returncode == 0, res.stderr
+    walk, page = walk_page
     text = page.read_text()
     data = json.loads(
         re.search(r'<script id="motion-data" type="application/json">(.*?)</script>', text, re.DOTALL)[1]
