@@ -125,8 +125,8 @@ def test_project_with_the_shipped_policy(run_clip) -> None:
     assert out.simulated.shape == clip.joints.shape
     bound = load_policy().settings.cap * cfg.tracking.residual_force
     assert float(out.residual_force.max()) <= bound + 1e-9
-    # A run is chaotic to simulate: a 1e-6 m rounding change of this input (the import floor of 2026-11-29)
-    # moved its mean MPJPE from 0.126 to 0.151 m, so the bound leaves room for rounding, not for a fall.
+    # A run is chaotic to simulate: the bound leaves room for rounding, not for a fall
+    # (docs/decisions/projection.md: "the policy test's bound on a chaotic run").
     assert bool(out.success) and float(out.mpjpe.mean()) < 0.2
     again = project(clip.joints, clip.fps, cfg)
     np.testing.assert_array_equal(out.simulated, again.simulated)  # deterministic
