@@ -129,6 +129,8 @@ class SearchRecord:
     cost: (N,) the winning candidate's cost per control step of its rollout;
     observations: (N, 599) float32, what a policy would see at each committed state
     (:func:`physmotion.physics.policy.observe`, cap 0);
+    qpos, qvel: (N, nq), (N, nv) the committed states: the searched trajectory, which the body follows with no
+    outside hand by construction;
     rollouts: total candidate rollouts simulated; sim_steps: total simulation steps.
     """
 
@@ -136,18 +138,27 @@ class SearchRecord:
     effort: np.ndarray
     cost: np.ndarray
     observations: np.ndarray | None = None
+    qpos: np.ndarray | None = None
+    qvel: np.ndarray | None = None
     rollouts: int = 0
     sim_steps: int = 0
 
 
+Proposal = Callable[[np.ndarray], np.ndarray]  # a policy's observation (599,) -> offsets (63,) rad
+
+
 class SearchController:
-    """Runs one episode of the search along a reference (see the module docstring)."""
+    """Runs one episode of the search along a reference (see the module docstring).
+
+    proposal: where the first round's mean of each window comes from (amortized search: a learned policy
+    proposes, a small search refines); None: ``warm`` x the last committed offset."""
 
     def __init__(self, model, config: SearchConfig | None = None, humanoid: HumanoidConfig | None = None,
-                 tracking: TrackingConfig | None = None) -> None:  # fmt: skip
+                 tracking: TrackingConfig | None = None, proposal: Proposal | None = None) -> None:  # fmt: skip
         import mujoco
 
         self.model = model
+        self.proposal = proposal
         self.config = config or SearchConfig()
         self.humanoid = humanoid or HumanoidConfig()
         self.tracker = ModelBasedTracker(model, no_hand(tracking or TrackingConfig()))
@@ -168,11 +179,13 @@ class SearchController:
             self._spread[self.layout.hinge_qpos[j] - 7] = self.config.foot_sigma
 
     # --- one episode -----------------------------------------------------------------------------------
-    def run(self, ref: Reference, reset_on_fail: bool = False,
-            on_step: Callable[[int, int], None] | None = None) -> tuple[Rollout, SearchRecord]:  # fmt: skip
+    def run(self, ref: Reference, reset_on_fail: bool = False, on_step: Callable[[int, int], None] | None = None,
+            push: np.ndarray | None = None) -> tuple[Rollout, SearchRecord]:  # fmt: skip
         """Search along ``ref`` from its first frame. A committed state that has fallen ends the episode
         (``failed_at``, the rest repeating the last state) or, with ``reset_on_fail``, puts the humanoid back
-        on the reference there and counts a reset. on_step(done, total): control steps committed."""
+        on the reference there and counts a reset. on_step(done, total): control steps committed.
+        push: (6,) added to the root's velocity at the start (linear m/s, angular rad/s, MuJoCo's free-joint
+        velocity): a perturbed start, so that teacher data covers recoveries."""
         import mujoco
 
         from physmotion.physics.sim import _quiet_mujoco_warnings
@@ -185,6 +198,9 @@ class SearchController:
         goal = _Goal(ref, cfg)
         data = mujoco.MjData(model)
         reset_state(model, data, ref)
+        if push is not None:
+            data.qvel[:6] += push
+            mujoco.mj_forward(model, data)
         states = np.zeros((n, self._nstate))
         states[0] = self._get(data)
         offsets = np.zeros((n, model.nu))
@@ -202,6 +218,8 @@ class SearchController:
             w = min(cfg.window, n - 1 - k)
             best, best_attempt = None, 0
             first = cfg.retries if k < furthest else 0
+            if self.proposal is not None:
+                mean = self._propose(states[k], ref, k, last, cfg.warm)
             for attempt in range(first, cfg.retries + 1):
                 harder = cfg.harder(attempt)
                 found = self._search(states[k], nominal, goal, k, w, mean, last, harder, rng, record)
@@ -249,7 +267,21 @@ class SearchController:
                 on_step(k, n - 1)
         roll, record.observations = self._rollout(ref, states, failed_at, resets)
         roll.reset_steps = reset_steps
+        record.qpos = states[:, self._qpos_at : self._qpos_at + model.nq].copy()
+        record.qvel = states[:, self._qvel_at : self._qvel_at + model.nv].copy()
         return roll, record
+
+    def _propose(self, state: np.ndarray, ref: Reference, k: int, last: np.ndarray, warm: float) -> np.ndarray:
+        """The proposal's offsets (63,) rad at the committed state ``state`` of control step ``k``; a
+        non-finite proposal falls back to ``warm`` x the last committed offset."""
+        import mujoco
+
+        from physmotion.physics.policy import observe
+
+        mujoco.mj_setState(self.model, self._fk, state, self._spec)
+        mujoco.mj_forward(self.model, self._fk)
+        out = np.asarray(self.proposal(observe(self.model, self._fk, ref, k, 0.0)), dtype=float)
+        return out if np.all(np.isfinite(out)) else warm * last
 
     # --- the search of one window ------------------------------------------------------------------------
     def _search(self, state, nominal, goal, k, w, mean, last, cfg: SearchConfig, rng, record) -> _Candidate:
@@ -268,7 +300,8 @@ class SearchController:
             cand = mu + sigma * rng.standard_normal((cfg.candidates, len(mu)))
             cand[0] = mu
             if best is None:
-                cand[1] = 0.0  # the bare tracker
+                # the bare tracker; with a proposal, the last committed plan carried on instead
+                cand[1] = 0.0 if self.proposal is None else cfg.warm * last
             else:
                 cand[1] = best.offset  # keep the best so far
             applied = (blend * cand[:, None, :] + (1 - blend) * last) * scale[None, :, None]  # (C, steps, nu)
