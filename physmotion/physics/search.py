@@ -195,7 +195,7 @@ class SearchController:
         n = len(ref.qpos)
         rng = np.random.default_rng(cfg.seed)
         nominal = np.stack([self.tracker.act(None, ref, k)[0] for k in range(n)])  # (N, nu)
-        goal = _Goal(ref, cfg)
+        goal = SearchGoal(ref, cfg)
         data = mujoco.MjData(model)
         reset_state(model, data, ref)
         if push is not None:
@@ -271,6 +271,23 @@ class SearchController:
         record.qvel = states[:, self._qvel_at : self._qvel_at + model.nv].copy()
         return roll, record
 
+    def window(self, ref: Reference, state: np.ndarray, k: int, mean: np.ndarray, seed: int) -> np.ndarray:
+        """The offsets (63,) rad that one window's search (this controller's effort, no retries) commits
+        from ``state`` (a full-physics state, ``mj_getState``) at control step ``k`` of ``ref``, its first
+        round centred on ``mean`` (63,); the labels of a student's own states (DAgger). Deterministic in
+        ``seed``."""
+        if getattr(self, "_planned", (None,))[0] is not ref:  # nominal controls and goal, once per reference
+            nominal = np.stack([self.tracker.act(None, ref, j)[0] for j in range(len(ref.qpos))])
+            self._planned = (ref, nominal, SearchGoal(ref, self.config))
+        _, nominal, goal = self._planned
+        w = min(self.config.window, len(ref.qpos) - 1 - k)
+        if w < 1:
+            return np.zeros(self.model.nu)
+        record = SearchRecord(np.zeros(0), np.zeros(0), np.zeros(0))
+        found = self._search(state, nominal, goal, k, w, np.asarray(mean, dtype=float), np.asarray(mean, dtype=float),
+                             self.config, np.random.default_rng(seed), record)  # fmt: skip
+        return found.offset
+
     def _propose(self, state: np.ndarray, ref: Reference, k: int, last: np.ndarray, warm: float) -> np.ndarray:
         """The proposal's offsets (63,) rad at the committed state ``state`` of control step ``k``; a
         non-finite proposal falls back to ``warm`` x the last committed offset."""
@@ -323,7 +340,7 @@ class SearchController:
             mu, sigma = elite.mean(axis=0), np.maximum(elite.std(axis=0), 0.1 * cfg.sigma * self._spread)
         return best
 
-    def _cost(self, states: np.ndarray, goal: _Goal, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _cost(self, states: np.ndarray, goal: SearchGoal, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per-step cost (C, S), fall flags (C, S) and mean pelvis-relative body error (C, S), metres, of
         candidate states (C, S, nstate) after control steps k+1..k+S."""
         c = self.config.cost
@@ -419,7 +436,7 @@ class _Candidate:
         return (self.fell_at is not None and self.fell_at < w, float(self.body_error[:w].mean()))
 
 
-class _Goal:
+class SearchGoal:
     """The reference as the cost reads it, precomputed once per episode."""
 
     def __init__(self, ref: Reference, config: SearchConfig) -> None:

@@ -120,3 +120,48 @@ def test_controller_records_its_rollouts(captured_run: np.ndarray) -> None:
     assert record.rollouts >= windows * search.config.candidates * search.config.rounds
     assert roll.qpos.shape == (len(ref.qpos), prep.model.nq) and roll.failed_at is None
     assert np.all(record.effort[:-1] >= 0)
+
+
+def _short_search(captured_run: np.ndarray, proposal=None) -> tuple:
+    config = ProjectionConfig()
+    prep = prepare_motion(captured_run[:30], 20.0, config)
+    ref = prepare_reference(prep.model, prep.target, config.humanoid.control_dt, config.tracking)
+    tiny = SearchConfig(candidates=4, rounds=1, elites=2, horizon=3, retries=0, rollback=0, seed=2)
+    return SearchController(prep.model, tiny, config.humanoid, config.tracking, proposal), ref
+
+
+def test_a_proposal_centres_every_window(captured_run: np.ndarray) -> None:
+    seen: list[np.ndarray] = []
+
+    def propose(obs: np.ndarray) -> np.ndarray:
+        seen.append(obs)
+        return np.full(NUM_ACTIONS, 0.05)
+
+    search, ref = _short_search(captured_run, propose)
+    roll, record = search.run(ref)
+    end = len(ref.qpos) - 1 if roll.failed_at is None else roll.failed_at  # the tiny search may fall
+    assert end >= 9
+    windows = -(-end // search.config.window)
+    assert len(seen) >= windows and all(o.shape == (OBS_DIM,) for o in seen)
+    # The proposal is candidate 0 of the first round: a window where it won commits it exactly.
+    assert np.isclose(record.offsets[:end], 0.05).all(axis=1).any()
+    # A proposal that returns NaN falls back to the warm start; the episode stays finite.
+    nan, ref = _short_search(captured_run, lambda obs: np.full(NUM_ACTIONS, np.nan))
+    roll, record = nan.run(ref)
+    assert np.all(np.isfinite(record.offsets)) and np.all(np.isfinite(roll.qpos))
+
+
+def test_a_push_starts_the_root_faster_and_one_window_is_seeded(captured_run: np.ndarray) -> None:
+    search, ref = _short_search(captured_run)
+    push = np.array([0.3, -0.2, 0.0, 0.1, 0.0, -0.4])
+    _, plain = search.run(ref)
+    _, pushed = search.run(ref, push=push)
+    np.testing.assert_allclose(pushed.qvel[0, :6] - plain.qvel[0, :6], push, atol=1e-12)
+    state = np.concatenate([[0.0], plain.qpos[5], plain.qvel[5]])
+    import mujoco
+
+    full = np.zeros(mujoco.mj_stateSize(search.model, mujoco.mjtState.mjSTATE_FULLPHYSICS))
+    full[: len(state)] = state  # time, qpos, qvel; no actuator activations or plugin state in this model
+    a = search.window(ref, full, 5, np.zeros(NUM_ACTIONS), seed=9)
+    b = search.window(ref, full, 5, np.zeros(NUM_ACTIONS), seed=9)
+    assert a.shape == (NUM_ACTIONS,) and np.array_equal(a, b)

@@ -1,0 +1,234 @@
+"""Learning a fast controller from the search, compared on held-out motion with no outside hand; writes
+results/learn_from_search.md and .json.
+
+Usage: python -m experiments.learn_from_search [--teacher runs/teacher] [--data data_build/all] [--out runs/learn]
+       [--dagger-rounds 2] [--ppo runs/ppo_searched/policy] [--captured-test 10] [--max-seconds 5]
+
+Training data: the teacher records in ``--teacher`` (experiments/teacher_data.py: the search over the train
+split's captured clips, mirrored, and over plain samples of Morph's synthetic prompts, plain and perturbed starts).
+Methods (physmotion/imitator/student.py):
+- BC: behaviour cloning of the search's committed offsets;
+- DAgger: ``--dagger-rounds`` rounds in which the student drives the body along every training reference and
+  the states it visits (every 3rd control step in the 1.5 s before its fall, every 9th before that) are labelled by one window of a small search
+  (16 candidates x 2 rounds, lookahead 10) centred on the student's own proposal; refit on all pairs;
+- amortized search: the search at small efforts (candidates x rounds, lookahead), its first round centred on
+  the DAgger student's proposal, against the same efforts with no proposal: a curve of cost against success;
+- PPO (``--ppo``, trained by ``physmotion train imitator --teacher``, warm-started from BC): rsl-rl tracking the
+  searched trajectories, where given.
+Evaluation, every row from the first frame with no outside hand unless the row says "hand on": the first
+``--captured-test`` unmirrored clips of the dataset's test split (a take-level split: no take on both sides),
+at most ``--max-seconds`` each, and plain samples (4 s) of experiments.search_quality's FAST_PROMPTS and
+HELDOUT_PROMPTS (12 prompts never used for teacher data). A fall is the search's: pelvis 0.35 m under the
+reference's or tipped 1 rad from it. Columns per set: carried to the end, share of control steps survived,
+world / pelvis-relative MPJPE (mm, over the survived steps), CPU seconds per second of motion.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from dataclasses import replace
+from functools import lru_cache, partial
+from pathlib import Path
+
+import numpy as np
+
+from experiments._results import markdown_table, parse_args, run_meta, write_results
+from experiments.search_quality import FAST_PROMPTS, HELDOUT_PROMPTS
+from physmotion.imitator.clips import dataset_clips
+from physmotion.imitator.student import (StudentConfig, card, carry, dagger_labels, dagger_steps, fit_student, save_student,
+                                         student_policy, student_settings, teacher_pairs)  # fmt: skip
+from physmotion.imitator.teacher import TeacherConfig, load_teacher_set
+from physmotion.physics.search import SearchConfig, effort
+
+LABEL_EFFORT = SearchConfig(candidates=16, rounds=2, elites=4, horizon=10, retries=0, rollback=0)
+SMALL_EFFORTS = {  # name -> the amortized search's effort (no retries: a fixed cost per window)
+    "4x1, lookahead 6": SearchConfig(candidates=4, rounds=1, elites=2, horizon=6, retries=0, rollback=0),
+    "8x1, lookahead 6": SearchConfig(candidates=8, rounds=1, elites=3, horizon=6, retries=0, rollback=0),
+    "16x2, lookahead 10": SearchConfig(candidates=16, rounds=2, elites=4, horizon=10, retries=1, rollback=1),
+}
+
+
+def _prepared(joints: np.ndarray, fps: float):
+    from physmotion.physics.projection import prepare_motion
+    from physmotion.physics.tracking import prepare_reference
+
+    pconf = TeacherConfig().projection()
+    prep = prepare_motion(joints.astype(np.float64), fps, pconf)
+    return prep.model, prepare_reference(prep.model, prep.target, pconf.humanoid.control_dt, pconf.tracking), pconf
+
+
+@lru_cache(maxsize=8)
+def _policy(folder: str):
+    from physmotion.physics.policy import load_policy
+
+    return load_policy(folder)
+
+
+def _evaluate(job: tuple[str, dict, np.ndarray, float]) -> dict:
+    """One (row, motion): carried, survived share, MPJPE world / pelvis-relative, CPU seconds."""
+    from physmotion.physics.search import SearchController, no_hand
+    from physmotion.physics.tracking import ModelBasedTracker
+
+    name, spec, joints, fps = job
+    t0 = time.process_time()
+    model, ref, pconf = _prepared(joints, fps)
+    kind = spec["kind"]
+    if kind == "search":
+        pol = _policy(spec["proposal"]) if spec.get("proposal") else None
+        scale = pol.settings.action_scale if pol else 0.0
+        proposal = (lambda obs: scale * np.clip(pol.network(obs), -1.0, 1.0)) if pol else None
+        search = SearchController(model, replace(spec["config"], threads=1), pconf.humanoid, pconf.tracking, proposal)
+        roll, _ = search.run(ref)
+        survived = len(ref.qpos) - 1 if roll.failed_at is None else roll.failed_at
+        err, rel = _errors(model, roll.qpos[1 : survived + 1], ref.joints_mj[1 : survived + 1])
+        out = {"survived": survived, "steps": len(ref.qpos) - 1, "mpjpe": err, "mpjpe_rel": rel}
+    else:
+        if kind == "tracker":
+            tracking = pconf.tracking if spec["hand"] else no_hand(pconf.tracking)
+            controller = ModelBasedTracker(model, tracking)
+        else:
+            controller = _policy(spec["folder"]).controller(model)
+        c = carry(model, ref, controller, pconf.humanoid)
+        out = {"survived": c.survived, "steps": c.steps, "mpjpe": c.mpjpe, "mpjpe_rel": c.mpjpe_rel}
+    return out | {"row": name, "cpu": time.process_time() - t0, "seconds": (len(ref.qpos) - 1) / 30.0}
+
+
+def _errors(model, qpos: np.ndarray, target: np.ndarray) -> tuple[float, float]:
+    import mujoco
+
+    from physmotion.physics.humanoid import layout
+
+    if len(qpos) == 0:
+        return float("nan"), float("nan")
+    data, ids = mujoco.MjData(model), layout(model).body_ids
+    err, rel = [], []
+    for q, t in zip(qpos, target):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        b = data.xpos[ids]
+        err.append(np.linalg.norm(b - t, axis=-1).mean())
+        rel.append(np.linalg.norm((b - b[0]) - (t - t[0]), axis=-1).mean())
+    return float(np.mean(err)), float(np.mean(rel))
+
+
+def _dagger_one(job: tuple[dict, str, int]) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """A training record driven by the student in ``folder``: its visited states' labelled pairs, and the
+    steps survived of all."""
+    record, folder, seed = job
+    model, ref, pconf = _prepared(record["joints"], float(record["fps"]))
+    pol = _policy(folder)
+    c = carry(model, ref, pol.controller(model), pconf.humanoid, push=record["push"])
+    x, y = dagger_labels(model, ref, pol, c.states, dagger_steps(c), LABEL_EFFORT, pconf.humanoid, seed=seed)
+    return x, y, c.survived, c.steps
+
+
+def main(argv: list[str] | None = None) -> dict:
+    from physmotion.physics.workers import imap_in_workers, map_in_workers
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--teacher", default="runs/teacher")
+    ap.add_argument("--data", default="data_build/all")
+    ap.add_argument("--out", default="runs/learn")
+    ap.add_argument("--dagger-rounds", type=int, default=2)
+    ap.add_argument("--ppo", default=None)
+    ap.add_argument("--captured-test", type=int, default=10)
+    ap.add_argument("--max-seconds", type=float, default=5.0)
+    ap.add_argument("--full-search", action=argparse.BooleanOptionalAction, default=True)
+    ap.add_argument("--workers", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--results", default="results/learn_from_search")
+    args = parse_args(ap, argv)
+    out = Path(args.out)
+    records = load_teacher_set(args.teacher)
+    cfg = StudentConfig(seed=args.seed)
+    log: dict = {"records": len(records), "teacher_cpu_s": round(sum(float(r["cpu_seconds"]) for r in records)),
+                 "fits": {}}  # fmt: skip
+
+    # (a) behaviour cloning, then DAgger with labels centred on the student's own proposal
+    x, y, g = teacher_pairs(records, cfg.action_scale)
+    weights, stats = fit_student(x, y, g, cfg)
+    folders = {"BC": str(save_student(out / "bc", weights, student_settings(cfg), card(cfg, "BC", records, stats)))}
+    log["fits"]["BC"] = stats
+    print(f"BC: {stats}", flush=True)
+    current = folders["BC"]
+    for r in range(1, args.dagger_rounds + 1):
+        t0 = time.time()
+        jobs = [(rec, current, args.seed * 1000 + r * 100 + i) for i, rec in enumerate(records)]
+        got = map_in_workers(_dagger_one, jobs, args.workers)
+        x = np.concatenate([x] + [a for a, _, _, _ in got])
+        y = np.concatenate([y] + [b for _, b, _, _ in got])
+        g = np.concatenate([g] + [np.full(len(a), i) for i, (a, _, _, _) in enumerate(got)])
+        survived = sum(s for _, _, s, _ in got) / sum(n for _, _, _, n in got)
+        weights, stats = fit_student(x, y, g, cfg)
+        stats |= {"train_survived_before": round(survived, 3), "minutes": round((time.time() - t0) / 60, 1)}
+        name = f"DAgger {r}"
+        folders[name] = str(save_student(out / f"dagger{r}", weights, student_settings(cfg),
+                                         card(cfg, name, records, stats)))  # fmt: skip
+        log["fits"][name] = stats
+        current = folders[name]
+        print(f"{name}: {stats}", flush=True)
+    _policy.cache_clear()
+
+    # evaluation set
+    test = [c for c in dataset_clips(args.data, "test") if not c.name.startswith("M")][: args.captured_test]
+    motions = [("captured", c.joints[: int(args.max_seconds * c.fps)], c.fps) for c in test]
+    from physmotion.generate import GenerateConfig, generate
+
+    prompts = list(FAST_PROMPTS.values()) + list(HELDOUT_PROMPTS.values())
+    gen = generate(prompts, GenerateConfig(seconds=4.0, num=1, physics="none", seed=args.seed))
+    motions += [("generated", m.joints, float(m.fps)) for m in gen.motions]
+
+    rows: dict[str, dict] = {"tracker, hand on": {"kind": "tracker", "hand": True},
+                             "tracker, hand off": {"kind": "tracker", "hand": False}}  # fmt: skip
+    if args.full_search:
+        rows["search default (full)"] = {"kind": "search", "config": effort("default", args.seed)}
+    for name, folder in folders.items():
+        rows[f"{name} student"] = {"kind": "policy", "folder": folder}
+    if args.ppo:
+        rows["PPO on searched trajectories"] = {"kind": "policy", "folder": args.ppo}
+    for name, conf in SMALL_EFFORTS.items():
+        conf = replace(conf, seed=args.seed)
+        rows[f"search {name}"] = {"kind": "search", "config": conf}
+        rows[f"amortized: {current.split('/')[-1]} + search {name}"] = {"kind": "search", "config": conf,
+                                                                        "proposal": current}  # fmt: skip
+    jobs = [(name, spec, j, fps) for name, spec in rows.items() for _, j, fps in motions]
+    sets = [s for name in rows for s, _, _ in motions]
+    results: list = [None] * len(jobs)
+    for i, res in imap_in_workers(_evaluate, jobs, args.workers):
+        results[i] = res | {"set": sets[i]}
+    table, json_rows = [], []
+    for name in rows:
+        cells = [name]
+        entry = {"row": name}
+        for s in ("captured", "generated"):
+            rs = [r for r in results if r["row"] == name and r["set"] == s]
+            done = np.mean([r["survived"] == r["steps"] for r in rs])
+            share = sum(r["survived"] for r in rs) / sum(r["steps"] for r in rs)
+            err = np.nanmean([r["mpjpe"] for r in rs]) * 1000
+            rel = np.nanmean([r["mpjpe_rel"] for r in rs]) * 1000
+            cpu = sum(r["cpu"] for r in rs) / sum(r["seconds"] for r in rs)
+            entry[s] = {"motions": len(rs), "completed": float(done), "survived": float(share), "mpjpe_mm": float(err),
+                        "mpjpe_rel_mm": float(rel), "cpu_s_per_s": float(cpu)}  # fmt: skip
+            cells += [f"{100 * done:.0f} %", f"{share:.2f}", f"{err:.0f} / {rel:.0f}", f"{cpu:.2f}"]
+        table.append(cells)
+        json_rows.append(entry)
+    header = ["controller (no outside hand unless 'hand on')"]
+    for s in ("captured", "generated"):
+        header += [f"{s}: to the end", f"{s}: share survived", f"{s}: MPJPE world / pel-rel mm", f"{s}: CPU s / s"]
+    n_cap = sum(1 for s, _, _ in motions if s == "captured")
+    text = (f"# Learning a fast controller from the search (no outside hand)\n\nWritten by "
+            f"`python -m experiments.learn_from_search` (its docstring defines methods and columns). Teacher: "
+            f"{len(records)} searched records ({log['teacher_cpu_s']} CPU s), {len(g)} labelled pairs at the "
+            f"end. Evaluation: {n_cap} held-out captured clips, {len(motions) - n_cap} generated motions of "
+            f"prompts never used for teacher data.\n\n{markdown_table(header, table)}\n")  # fmt: skip
+    meta = run_meta(__file__, argv, args.tree, None)
+    payload = {"meta": meta, "rows": json_rows, "fits": log["fits"], "records": len(records), "pairs": int(len(g)),
+               "teacher_cpu_s": log["teacher_cpu_s"], "prompts": prompts, "test_clips": [c.name for c in test]}  # fmt: skip
+    write_results(args.results, text, payload)
+    print(text)
+    return payload
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,247 @@
+"""A fast controller learned from the search: a policy network (the shipped policy's form,
+:class:`~physmotion.physics.policy.PolicyNetwork`) trained on the search's teacher records, with no outside
+hand (docs/decisions/projection.md: "learning from the search").
+
+- Behaviour cloning (:func:`fit_student`): observations -> the search's committed offsets, scaled by
+  ``action_scale`` and clipped to [-1, 1]; MSE; inputs standardised.
+- DAgger with local labels (:func:`dagger_round`): the student drives the body (hand off) along the training
+  references; the states it visits before it falls are labelled by one window of a small search whose first
+  round is centred on the student's own proposal (:meth:`SearchController.window`, seeded per state), so a
+  label is a local improvement of what the student does, not an unrelated random optimum (the naive labels'
+  noise: ../shared/notes/search-prototype.md).
+- :func:`carry`: one episode of any controller with no outside hand, ended by a fall as the search defines
+  it (pelvis dropped or tipped against the reference), not by a world-position error.
+
+Training uses torch; acting (``PolicyNetwork``) is numpy, as P's workers require.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from physmotion.errors import PhysmotionError
+from physmotion.physics.humanoid import HumanoidConfig
+from physmotion.physics.policy import OBS_DIM, NUM_ACTIONS, Policy, PolicyNetwork, PolicySettings, settings_dict
+from physmotion.physics.search import SearchConfig, SearchController, SearchGoal, no_hand
+from physmotion.physics.tracking import Reference, TrackingConfig
+
+
+@dataclass(frozen=True)
+class StudentConfig:
+    """The student network and its supervised training."""
+
+    hidden: tuple[int, ...] = (512, 256)
+    action_scale: float = 0.3  # rad per unit action: the search's offsets reach 0.2-0.33 rad (its retries widen)
+    steps: int = 3000  # gradient steps per fit
+    batch: int = 512
+    learning_rate: float = 1e-3
+    weight_decay: float = 1e-4
+    validation: float = 0.1  # share of the records (whole records, not steps) held out for the validation loss
+    seed: int = 0
+
+
+def teacher_pairs(records: Sequence[dict], action_scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(observations (M, 599) float32, actions (M, 63) float32 in [-1, 1], record index (M,)) of every
+    committed control step of ``records`` (:func:`physmotion.imitator.teacher.load_teacher_set`) before its
+    fall, the last step (no action) left out."""
+    xs, ys, ids = [], [], []
+    for i, r in enumerate(records):
+        end = len(r["offsets"]) - 1
+        if int(r["failed_at"]) >= 0:
+            end = min(end, int(r["failed_at"]))
+        xs.append(r["observations"][:end])
+        ys.append(np.clip(r["offsets"][:end] / action_scale, -1.0, 1.0))
+        ids.append(np.full(end, i))
+    return (np.concatenate(xs).astype(np.float32), np.concatenate(ys).astype(np.float32),
+            np.concatenate(ids))  # fmt: skip
+
+
+def fit_student(x: np.ndarray, y: np.ndarray, groups: np.ndarray, config: StudentConfig) -> tuple[dict, dict]:
+    """Fit the student on observations x (M, 599) -> actions y (M, 63); groups (M,) names each pair's
+    record, and whole records are held out for validation. Returns the network's weights (PolicyNetwork's
+    arrays) and {"train_mse", "val_mse", and of predicting 0 (the bare tracker) "train_mse_zero",
+    "val_mse_zero"; "pairs"}."""
+    import torch
+
+    if len(x) != len(y) or x.shape[1:] != (OBS_DIM,) or y.shape[1:] != (NUM_ACTIONS,):
+        raise PhysmotionError(f"student data must be (M, {OBS_DIM}) and (M, {NUM_ACTIONS}), got {x.shape}, {y.shape}")
+    rng = np.random.default_rng(config.seed)
+    names = np.unique(groups)
+    held = set(rng.choice(names, size=max(1, int(round(config.validation * len(names)))), replace=False).tolist())
+    val = np.isin(groups, list(held)) if len(names) > 1 else np.zeros(len(x), dtype=bool)
+    mean = x[~val].mean(axis=0)
+    std = x[~val].std(axis=0) + 1e-2  # a floor: some inputs are constant over a data set (the cap)
+    torch.manual_seed(config.seed)
+    dims = [OBS_DIM, *config.hidden, NUM_ACTIONS]
+    layers: list = []
+    for i in range(len(dims) - 1):
+        layers.append(torch.nn.Linear(dims[i], dims[i + 1]))
+        if i < len(dims) - 2:
+            layers.append(torch.nn.ELU())
+    net = torch.nn.Sequential(*layers)
+    opt = torch.optim.AdamW(net.parameters(), lr=config.learning_rate, weight_decay=config.weight_decay)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, config.steps)
+    xt = torch.from_numpy((x - mean) / std)
+    yt = torch.from_numpy(y)
+    train_idx = np.flatnonzero(~val)
+    gen = torch.Generator().manual_seed(config.seed)
+    for _ in range(config.steps):
+        b = torch.from_numpy(train_idx)[torch.randint(len(train_idx), (config.batch,), generator=gen)]
+        loss = torch.mean((net(xt[b]) - yt[b]) ** 2)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        sched.step()
+    with torch.no_grad():
+        pred = net(xt)
+        err = ((pred - yt) ** 2).mean(dim=1).numpy()
+    stats = {"pairs": int(len(x)), "train_mse": float(err[~val].mean()), "train_mse_zero": float((y[~val] ** 2).mean()),
+             "val_mse": float(err[val].mean()) if val.any() else float("nan"),
+             "val_mse_zero": float((y[val] ** 2).mean()) if val.any() else float("nan")}  # fmt: skip
+    linears = [m for m in net if isinstance(m, torch.nn.Linear)]
+    weights = {"obs_mean": mean, "obs_std": std}
+    for i, lin in enumerate(linears):
+        weights[f"layers.{i}.weight"] = lin.weight.detach().numpy()
+        weights[f"layers.{i}.bias"] = lin.bias.detach().numpy()
+    return {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in weights.items()}, stats
+
+
+def student_settings(config: StudentConfig, tracking: TrackingConfig | None = None) -> PolicySettings:
+    """How a student acts: the search's nominal control (the tracker with every outside help off) plus
+    ``action_scale`` x its action, at cap 0."""
+    return PolicySettings(action_scale=config.action_scale, cap=0.0, tracking=no_hand(tracking or TrackingConfig()))
+
+
+def save_student(folder: str | Path, weights: dict, settings: PolicySettings, card: dict) -> Path:
+    """Write a policy folder P loads (``--controller policy --policy FOLDER``): policy.safetensors,
+    settings.json, card.json (what it was trained on, its licence tags and figures), each atomically."""
+    from safetensors.numpy import save
+
+    from physmotion.motion import write_atomic
+
+    root = Path(folder)
+    root.mkdir(parents=True, exist_ok=True)
+    write_atomic(root / "policy.safetensors", lambda f: f.write(save(weights)))
+    write_atomic(root / "settings.json", lambda f: f.write(json.dumps(settings_dict(settings), indent=1).encode()))
+    write_atomic(root / "card.json", lambda f: f.write(json.dumps(card, indent=1).encode()))
+    return root
+
+
+def student_policy(weights: dict, settings: PolicySettings) -> Policy:
+    """The trained weights as a :class:`Policy` (no card)."""
+    return Policy(PolicyNetwork(weights), settings, {})
+
+
+@dataclass
+class Carried:
+    """One episode with no outside hand: ``survived`` control steps before the fall (all of them when
+    ``completed``), of ``steps``; world and pelvis-relative MPJPE (m) over the survived steps; the
+    visited full-physics states (steps, nstate) up to the fall."""
+
+    steps: int
+    survived: int
+    completed: bool
+    mpjpe: float
+    mpjpe_rel: float
+    states: np.ndarray
+
+
+def carry(model, ref: Reference, controller, humanoid: HumanoidConfig | None = None,
+          push: np.ndarray | None = None, fall: SearchConfig | None = None) -> Carried:  # fmt: skip
+    """Run ``controller`` (a :class:`~physmotion.physics.tracking.Controller`, whatever outside help it
+    gives) along ``ref`` from its first frame (its root velocity plus ``push`` (6,)) until the end or a fall
+    (``fall``'s drop and tilt: the search's definition)."""
+    import mujoco
+
+    from physmotion.physics.sim import _quiet_mujoco_warnings, control_step, reset_state
+    from physmotion.physics.tracking import STANDARD_GRAVITY
+
+    _quiet_mujoco_warnings()
+    hum = humanoid or HumanoidConfig()
+    goal = SearchGoal(ref, fall or SearchConfig())
+    data = mujoco.MjData(model)
+    reset_state(model, data, ref)
+    if push is not None:
+        data.qvel[:6] += push
+        mujoco.mj_forward(model, data)
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    states = [_state(model, data, spec)]
+    weight = float(model.body_subtreemass[0]) * STANDARD_GRAVITY
+    from physmotion.physics.humanoid import layout
+
+    ids = layout(model).body_ids
+    err, rel = [], []
+    n = len(ref.qpos)
+    survived = n - 1
+    for k in range(n - 1):
+        control_step(model, data, ref, controller, k, hum, weight)
+        if not np.all(np.isfinite(data.qpos)) or goal.fallen(data.qpos, k + 1):
+            survived = k
+            break
+        bodies, target = data.xpos[ids], ref.joints_mj[k + 1]
+        err.append(np.linalg.norm(bodies - target, axis=-1).mean())
+        rel.append(np.linalg.norm((bodies - bodies[0]) - (target - target[0]), axis=-1).mean())
+        states.append(_state(model, data, spec))
+    return Carried(n - 1, survived, survived == n - 1, float(np.mean(err)) if err else float("nan"),
+                   float(np.mean(rel)) if rel else float("nan"), np.stack(states))  # fmt: skip
+
+
+def _state(model, data, spec) -> np.ndarray:
+    import mujoco
+
+    s = np.empty(mujoco.mj_stateSize(model, spec))
+    mujoco.mj_getState(model, data, s, spec)
+    return s
+
+
+def dagger_steps(carried: Carried, near: int = 45, every_near: int = 3, every_far: int = 9) -> list[int]:
+    """Which visited states to label: every ``every_near``-th of the ``near`` control steps before the
+    student's fall (where it goes wrong), every ``every_far``-th before them (and everywhere when it did not
+    fall): a fixed labelling budget spent where the student needs it."""
+    end = carried.survived
+    start = end - near if not carried.completed else end + 1
+    far = [k for k in range(0, max(start, 0), every_far)]
+    return far + [k for k in range(max(start, 0), end + 1, every_near)]
+
+
+def dagger_labels(model, ref: Reference, policy: Policy, states: np.ndarray, steps: Sequence[int],
+                  label: SearchConfig, humanoid: HumanoidConfig | None = None,
+                  seed: int = 0) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Observations (M, 599) and action labels (M, 63) of the student's visited ``states`` (S, nstate; state
+    k at control step k) at control ``steps``: each labelled by a window of the search at effort ``label``
+    centred on the student's own proposal there (seeded by ``seed`` and the step)."""
+    import mujoco
+
+    from physmotion.physics.policy import observe
+
+    search = SearchController(model, replace(label, threads=1), humanoid, policy.settings.tracking)
+    data = mujoco.MjData(model)
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    scale = policy.settings.action_scale
+    xs, ys = [], []
+    for k in steps:
+        if k >= min(len(states), len(ref.qpos) - 1):
+            continue
+        mujoco.mj_setState(model, data, states[k], spec)
+        mujoco.mj_forward(model, data)
+        obs = observe(model, data, ref, k, 0.0)
+        proposal = scale * np.clip(policy.network(obs), -1.0, 1.0)
+        offset = search.window(ref, states[k], k, proposal, seed * 100_003 + k)
+        xs.append(obs)
+        ys.append(np.clip(offset / scale, -1.0, 1.0))
+    if not xs:
+        return np.zeros((0, OBS_DIM), np.float32), np.zeros((0, NUM_ACTIONS), np.float32)
+    return np.stack(xs).astype(np.float32), np.stack(ys).astype(np.float32)
+
+
+def card(config: StudentConfig, method: str, records: Sequence[dict], stats: dict) -> dict:
+    """A student's card: how it was made, what data it saw (sources and licence tags) and its fit."""
+    tags = sorted({str(r["licence_tag"]) for r in records if str(r["licence_tag"])})
+    origins = sorted({str(r["origin"]) for r in records})
+    return {"method": method, "config": asdict(config), "records": len(records), "origins": origins,
+            "licence_tags": tags, "fit": stats, "outside_help": "none (cap 0, no feet balance)"}  # fmt: skip
