@@ -26,9 +26,10 @@ world / pelvis-relative MPJPE (mm, over the survived steps), CPU seconds per sec
 from __future__ import annotations
 
 import argparse
+import json
 import time
 from dataclasses import replace
-from functools import lru_cache, partial
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -36,26 +37,15 @@ import numpy as np
 from experiments._results import markdown_table, parse_args, run_meta, write_results
 from experiments.search_quality import FAST_PROMPTS, HELDOUT_PROMPTS
 from physmotion.imitator.clips import dataset_clips
-from physmotion.imitator.student import (StudentConfig, card, carry, dagger_labels, dagger_steps, fit_student, save_student,
-                                         student_policy, student_settings, teacher_pairs)  # fmt: skip
-from physmotion.imitator.teacher import TeacherConfig, load_teacher_set
+from physmotion.imitator.student import StudentConfig, carry, prepared, train_student
+from physmotion.imitator.teacher import load_teacher_set
 from physmotion.physics.search import SearchConfig, effort
 
-LABEL_EFFORT = SearchConfig(candidates=16, rounds=2, elites=4, horizon=10, retries=0, rollback=0)
 SMALL_EFFORTS = {  # name -> the amortized search's effort (no retries: a fixed cost per window)
     "4x1, lookahead 6": SearchConfig(candidates=4, rounds=1, elites=2, horizon=6, retries=0, rollback=0),
     "8x1, lookahead 6": SearchConfig(candidates=8, rounds=1, elites=3, horizon=6, retries=0, rollback=0),
     "16x2, lookahead 10": SearchConfig(candidates=16, rounds=2, elites=4, horizon=10, retries=1, rollback=1),
 }
-
-
-def _prepared(joints: np.ndarray, fps: float):
-    from physmotion.physics.projection import prepare_motion
-    from physmotion.physics.tracking import prepare_reference
-
-    pconf = TeacherConfig().projection()
-    prep = prepare_motion(joints.astype(np.float64), fps, pconf)
-    return prep.model, prepare_reference(prep.model, prep.target, pconf.humanoid.control_dt, pconf.tracking), pconf
 
 
 @lru_cache(maxsize=8)
@@ -72,7 +62,7 @@ def _evaluate(job: tuple[str, dict, np.ndarray, float]) -> dict:
 
     name, spec, joints, fps = job
     t0 = time.process_time()
-    model, ref, pconf = _prepared(joints, fps)
+    model, ref, pconf = prepared(joints, fps)
     kind = spec["kind"]
     if kind == "search":
         pol = _policy(spec["proposal"]) if spec.get("proposal") else None
@@ -112,19 +102,8 @@ def _errors(model, qpos: np.ndarray, target: np.ndarray) -> tuple[float, float]:
     return float(np.mean(err)), float(np.mean(rel))
 
 
-def _dagger_one(job: tuple[dict, str, int]) -> tuple[np.ndarray, np.ndarray, int, int]:
-    """A training record driven by the student in ``folder``: its visited states' labelled pairs, and the
-    steps survived of all."""
-    record, folder, seed = job
-    model, ref, pconf = _prepared(record["joints"], float(record["fps"]))
-    pol = _policy(folder)
-    c = carry(model, ref, pol.controller(model), pconf.humanoid, push=record["push"])
-    x, y = dagger_labels(model, ref, pol, c.states, dagger_steps(c), LABEL_EFFORT, pconf.humanoid, seed=seed)
-    return x, y, c.survived, c.steps
-
-
 def main(argv: list[str] | None = None) -> dict:
-    from physmotion.physics.workers import imap_in_workers, map_in_workers
+    from physmotion.physics.workers import imap_in_workers
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--teacher", default="runs/teacher")
@@ -142,32 +121,13 @@ def main(argv: list[str] | None = None) -> dict:
     out = Path(args.out)
     records = load_teacher_set(args.teacher)
     cfg = StudentConfig(seed=args.seed)
-    log: dict = {"records": len(records), "teacher_cpu_s": round(sum(float(r["cpu_seconds"]) for r in records)),
-                 "fits": {}}  # fmt: skip
+    teacher_cpu = round(sum(float(r["cpu_seconds"]) for r in records))
 
     # (a) behaviour cloning, then DAgger with labels centred on the student's own proposal
-    x, y, g = teacher_pairs(records, cfg.action_scale)
-    weights, stats = fit_student(x, y, g, cfg)
-    folders = {"BC": str(save_student(out / "bc", weights, student_settings(cfg), card(cfg, "BC", records, stats)))}
-    log["fits"]["BC"] = stats
-    print(f"BC: {stats}", flush=True)
-    current = folders["BC"]
-    for r in range(1, args.dagger_rounds + 1):
-        t0 = time.time()
-        jobs = [(rec, current, args.seed * 1000 + r * 100 + i) for i, rec in enumerate(records)]
-        got = map_in_workers(_dagger_one, jobs, args.workers)
-        x = np.concatenate([x] + [a for a, _, _, _ in got])
-        y = np.concatenate([y] + [b for _, b, _, _ in got])
-        g = np.concatenate([g] + [np.full(len(a), i) for i, (a, _, _, _) in enumerate(got)])
-        survived = sum(s for _, _, s, _ in got) / sum(n for _, _, _, n in got)
-        weights, stats = fit_student(x, y, g, cfg)
-        stats |= {"train_survived_before": round(survived, 3), "minutes": round((time.time() - t0) / 60, 1)}
-        name = f"DAgger {r}"
-        folders[name] = str(save_student(out / f"dagger{r}", weights, student_settings(cfg),
-                                         card(cfg, name, records, stats)))  # fmt: skip
-        log["fits"][name] = stats
-        current = folders[name]
-        print(f"{name}: {stats}", flush=True)
+    folders = train_student(records, out, cfg, args.dagger_rounds, workers=args.workers)
+    current = folders[list(folders)[-1]]
+    fits = {name: json.loads((Path(f) / "card.json").read_text())["fit"] for name, f in folders.items()}
+    pairs = fits[list(fits)[-1]]["pairs"]
     _policy.cache_clear()
 
     # evaluation set
@@ -219,12 +179,12 @@ def main(argv: list[str] | None = None) -> dict:
     n_cap = sum(1 for s, _, _ in motions if s == "captured")
     text = (f"# Learning a fast controller from the search (no outside hand)\n\nWritten by "
             f"`python -m experiments.learn_from_search` (its docstring defines methods and columns). Teacher: "
-            f"{len(records)} searched records ({log['teacher_cpu_s']} CPU s), {len(g)} labelled pairs at the "
+            f"{len(records)} searched records ({teacher_cpu} CPU s), {pairs} labelled pairs at the "
             f"end. Evaluation: {n_cap} held-out captured clips, {len(motions) - n_cap} generated motions of "
             f"prompts never used for teacher data.\n\n{markdown_table(header, table)}\n")  # fmt: skip
     meta = run_meta(__file__, argv, args.tree, None)
-    payload = {"meta": meta, "rows": json_rows, "fits": log["fits"], "records": len(records), "pairs": int(len(g)),
-               "teacher_cpu_s": log["teacher_cpu_s"], "prompts": prompts, "test_clips": [c.name for c in test]}  # fmt: skip
+    payload = {"meta": meta, "rows": json_rows, "fits": fits, "records": len(records), "pairs": pairs,
+               "teacher_cpu_s": teacher_cpu, "prompts": prompts, "test_clips": [c.name for c in test]}  # fmt: skip
     write_results(args.results, text, payload)
     print(text)
     return payload

@@ -163,3 +163,59 @@ def train_length_cmd(
     console.print(f"test MAE {r.test_mae:.2f} s (constant 6 s: {r.test_mae_const6:.2f} s, the train mean "
                   f"{r.train_mean:.2f} s: {r.test_mae_mean:.2f} s); ridge {r.alpha:g}; model in {out}",
                   highlight=False)  # fmt: skip
+
+
+@train_app.command("teacher")
+def train_teacher_cmd(
+    data: list[Path] = typer.Option([], help="Built dataset folder(s) (`data build`): their train split, "
+                                    "mirrored copies included, is searched; repeat for several."),
+    motions: list[Path] = typer.Option([], help="Folder(s) of generated .npz motions (`generate --physics "
+                                       "none`, or `morph synth`'s prompts) to search as well."),
+    out: Path = typer.Option(..., "-o", "--out", help="Teacher folder: <job>.npz per search and index.json; "
+                             "jobs already in it are skipped, so a stopped run continues."),
+    jobs: int | None = typer.Option(None, help="Search only the first this many jobs of the seeded order (a "
+                                    "random sample of the whole; a larger number extends it)."),
+    effort: str = typer.Option("default", help="The search's effort: fast, default or best."),
+    perturbed: int = typer.Option(1, help="Searches per segment from a pushed start, besides the plain one."),
+    workers: int = typer.Option(0, help="Local processes, one job each (0: one per core)."),
+    ray: str | None = typer.Option(None, help="Run one Ray task per job on the cluster at this address, or "
+                                   "'local' (needs `pip install 'physmotion[ray]'`; docs/cluster.md)."),
+    seed: int = typer.Option(0, help="Seed of the job order, the pushes and the search."),
+) -> None:
+    """Search many motions with no outside hand and keep what a policy learns from (teacher records)."""
+    from physmotion.imitator.clips import dataset_clips, motion_clips
+    from physmotion.imitator.teacher import TeacherConfig, build_teacher_set, teacher_jobs
+    from physmotion.physics.search import effort as search_effort
+
+    if not data and not motions:
+        raise PhysmotionError("give at least one --data or --motions folder")
+    clips = [c for d in data for c in dataset_clips(d, "train")] + [c for m in motions for c in motion_clips(m)]
+    config = TeacherConfig(search=search_effort(effort, seed), perturbed=perturbed, seed=seed)
+    todo = teacher_jobs(clips, config)[:jobs]
+    index = build_teacher_set(todo, out, config, workers, ray, progress=sys.stderr.isatty())
+    console.print(f"{index['written']} of {len(todo)} searches in {out} ({index['completed']} to the end, "
+                  f"{index['cpu_seconds'] / 60:.0f} CPU min in all)", highlight=False)  # fmt: skip
+
+
+@train_app.command("student")
+def train_student_cmd(
+    teacher: Path = typer.Option(..., help="Teacher folder (`train teacher`)."),
+    out: Path = typer.Option(..., "-o", "--out", help="Output folder: bc/ and dagger<r>/ policy folders; must be "
+                             "new or empty."),
+    dagger_rounds: int = typer.Option(2, help="Rounds of DAgger after behaviour cloning."),
+    steps: int | None = typer.Option(None, help="Gradient steps per fit (default: 3000)."),
+    workers: int = typer.Option(0, help="Processes for DAgger's episodes and labels (0: one per core)."),
+    seed: int = typer.Option(0, help="Seed of the fit and the labels' searches."),
+) -> None:
+    """Learn a fast controller from the search's teacher records (no outside hand): BC, then DAgger."""
+    from physmotion.imitator.student import StudentConfig, train_student
+    from physmotion.imitator.teacher import load_teacher_set
+    from physmotion.paths import check_output
+
+    check_output(out, "folder")
+    records = load_teacher_set(teacher)
+    folders = train_student(records, out, _with(StudentConfig(seed=seed), steps=steps), dagger_rounds,
+                            workers=workers, log=console.print)  # fmt: skip
+    last = folders[list(folders)[-1]]
+    console.print(f"students in {out}; use the last with --controller policy --policy {last}, or as the "
+                  f"proposal of a small search: --controller search --policy {last}", highlight=False)  # fmt: skip

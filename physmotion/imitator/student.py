@@ -26,7 +26,14 @@ import numpy as np
 
 from physmotion.errors import PhysmotionError
 from physmotion.physics.humanoid import HumanoidConfig
-from physmotion.physics.policy import OBS_DIM, NUM_ACTIONS, Policy, PolicyNetwork, PolicySettings, settings_dict
+from physmotion.physics.policy import (
+    NUM_ACTIONS,
+    OBS_DIM,
+    Policy,
+    PolicyNetwork,
+    PolicySettings,
+    settings_dict,
+)
 from physmotion.physics.search import SearchConfig, SearchController, SearchGoal, no_hand
 from physmotion.physics.tracking import Reference, TrackingConfig
 
@@ -100,7 +107,7 @@ def fit_student(x: np.ndarray, y: np.ndarray, groups: np.ndarray, config: Studen
     with torch.no_grad():
         pred = net(xt)
         err = ((pred - yt) ** 2).mean(dim=1).numpy()
-    stats = {"pairs": int(len(x)), "train_mse": float(err[~val].mean()), "train_mse_zero": float((y[~val] ** 2).mean()),
+    stats = {"pairs": len(x), "train_mse": float(err[~val].mean()), "train_mse_zero": float((y[~val] ** 2).mean()),
              "val_mse": float(err[val].mean()) if val.any() else float("nan"),
              "val_mse_zero": float((y[val] ** 2).mean()) if val.any() else float("nan")}  # fmt: skip
     linears = [m for m in net if isinstance(m, torch.nn.Linear)]
@@ -237,6 +244,66 @@ def dagger_labels(model, ref: Reference, policy: Policy, states: np.ndarray, ste
     if not xs:
         return np.zeros((0, OBS_DIM), np.float32), np.zeros((0, NUM_ACTIONS), np.float32)
     return np.stack(xs).astype(np.float32), np.stack(ys).astype(np.float32)
+
+
+LABEL_EFFORT = SearchConfig(candidates=16, rounds=2, elites=4, horizon=10, retries=0, rollback=0)
+
+
+def prepared(joints: np.ndarray, fps: float) -> tuple:
+    """(model, reference, P's configuration) of a motion (T, 22, 3) at ``fps`` as the teacher data searched it
+    (:meth:`physmotion.imitator.teacher.TeacherConfig.projection`)."""
+    from physmotion.imitator.teacher import TeacherConfig
+    from physmotion.physics.projection import prepare_motion
+    from physmotion.physics.tracking import prepare_reference
+
+    pconf = TeacherConfig().projection()
+    prep = prepare_motion(joints.astype(np.float64), fps, pconf)
+    return prep.model, prepare_reference(prep.model, prep.target, pconf.humanoid.control_dt, pconf.tracking), pconf
+
+
+def train_student(records: Sequence[dict], out: str | Path, config: StudentConfig | None = None,
+                  dagger_rounds: int = 2, label: SearchConfig = LABEL_EFFORT, workers: int = 0,
+                  log=print) -> dict[str, str]:  # fmt: skip
+    """Behaviour cloning on ``records``, then ``dagger_rounds`` rounds of DAgger (the student drives every
+    record's reference from its start; :func:`dagger_steps` of its visited states are labelled by
+    :func:`dagger_labels`; refit on all pairs). Each student is written as a policy folder,
+    ``out/bc`` and ``out/dagger<r>``. Returns {name: folder}; each card holds the fit and, for DAgger, the
+    share of control steps the previous student survived on the training records."""
+    from physmotion.physics.workers import map_in_workers
+
+    cfg = config or StudentConfig()
+    root = Path(out)
+    x, y, g = teacher_pairs(records, cfg.action_scale)
+    weights, stats = fit_student(x, y, g, cfg)
+    folders = {"BC": str(save_student(root / "bc", weights, student_settings(cfg), card(cfg, "BC", records, stats)))}
+    log(f"BC: {len(x)} pairs, validation MSE {stats['val_mse']:.3f} (0 predicted: {stats['val_mse_zero']:.3f})")
+    for r in range(1, dagger_rounds + 1):
+        jobs = [(rec, folders[list(folders)[-1]], cfg.seed * 1000 + r * 100 + i, label) for i, rec in enumerate(records)]
+        got = map_in_workers(_dagger_one, jobs, workers)
+        x = np.concatenate([x] + [a for a, _, _, _ in got])
+        y = np.concatenate([y] + [b for _, b, _, _ in got])
+        g = np.concatenate([g] + [np.full(len(a), i) for i, (a, _, _, _) in enumerate(got)])
+        survived = sum(s for _, _, s, _ in got) / max(sum(n for _, _, _, n in got), 1)
+        weights, stats = fit_student(x, y, g, cfg)
+        stats["survived_before"] = round(float(survived), 3)
+        name = f"DAgger {r}"
+        folders[name] = str(save_student(root / f"dagger{r}", weights, student_settings(cfg),
+                                         card(cfg, name, records, stats)))  # fmt: skip
+        log(f"{name}: the student before it survived {survived:.2f} of the training steps; {len(x)} pairs, "
+            f"validation MSE {stats['val_mse']:.3f}")  # fmt: skip
+    return folders
+
+
+def _dagger_one(job: tuple[dict, str, int, SearchConfig]) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """A training record driven by the student in a policy folder: its labelled pairs, steps survived, steps."""
+    from physmotion.physics.policy import load_policy
+
+    record, folder, seed, label = job
+    model, ref, pconf = prepared(record["joints"], float(record["fps"]))
+    pol = load_policy(folder)
+    c = carry(model, ref, pol.controller(model), pconf.humanoid, push=record["push"])
+    x, y = dagger_labels(model, ref, pol, c.states, dagger_steps(c), label, pconf.humanoid, seed=seed)
+    return x, y, c.survived, c.steps
 
 
 def card(config: StudentConfig, method: str, records: Sequence[dict], stats: dict) -> dict:

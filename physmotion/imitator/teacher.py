@@ -171,7 +171,7 @@ def _row(path: Path) -> dict:
     with np.load(path) as z:
         return {"id": path.stem, "source": str(z["source"]), "origin": str(z["origin"]),
                 "licence_tag": str(z["licence_tag"]), "push": np.round(z["push"], 3).tolist(),
-                "steps": int(len(z["offsets"])), "completed": bool(z["completed"]),
+                "steps": len(z["offsets"]), "completed": bool(z["completed"]),
                 "cpu_seconds": round(float(z["cpu_seconds"]), 2), "rollouts": int(z["rollouts"])}  # fmt: skip
 
 

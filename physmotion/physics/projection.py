@@ -82,6 +82,7 @@ class ProjectionConfig:
     # own tracker settings and residual cap; ``tracking`` applies to the tracker only.
     # "search": no outside hand at all, the body's own joint targets searched (physics/search.py), at the
     # effort of ``search``; slow (seconds per second of motion), for offline projection and Morph's data.
+    # With ``policy`` set, the search is amortized: that policy proposes each window's first mean.
     controller: str = "tracker"
     policy: str | None = None
     search: SearchConfig = field(default_factory=SearchConfig)
@@ -424,7 +425,12 @@ def _search_one(prep: PreparedMotion, x: np.ndarray, fps: float, config: Project
     error (the body may drift from the reference's path), so imitation selection keeps the simulation of a
     grounded motion that did not fall; ``mpjpe`` still reports the world error, drift included."""
     ref = prepare_reference(prep.model, prep.target, config.humanoid.control_dt, config.tracking)
-    search = SearchController(prep.model, config.search, config.humanoid, config.tracking)
+    proposal = None
+    if config.policy is not None:  # amortized search: the policy proposes each window's first mean
+        policy = _policy(config.policy)
+        scale = policy.settings.action_scale
+        proposal = lambda obs: scale * np.clip(policy.network(obs), -1.0, 1.0)  # noqa: E731
+    search = SearchController(prep.model, config.search, config.humanoid, config.tracking, proposal)
     roll, record = search.run(ref, reset_on_fail=config.reset_on_fail, on_step=on_step)
     out = _back_to_input_rate(roll, prep.model, prep.lift, x, fps, 1.0 / config.humanoid.control_dt, np.inf,
                               config.reset_on_fail, prep.grounded, config.crossfade)  # fmt: skip

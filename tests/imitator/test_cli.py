@@ -29,3 +29,21 @@ def test_project_with_the_policy_reports_the_residual(small_built_dir: Path, tmp
     res = invoke("project", tmp_path / "walk.npz", "-o", tmp_path / "x.npz", "--controller", "pid")
     assert res.returncode == 1 and "controller must be one of tracker, policy, search" in res.stderr
     assert not (tmp_path / "x.npz").exists()
+
+
+def test_train_teacher_and_student_from_the_command_line(small_built_dir: Path, tmp_path: Path) -> None:
+    res = invoke("train", "teacher", "-o", tmp_path / "t")
+    assert res.returncode == 1 and res.stderr.strip() == "error: give at least one --data or --motions folder"
+    res = invoke("train", "teacher", "--data", small_built_dir, "-o", tmp_path / "t", "--jobs", "1",
+                 "--effort", "fast", "--perturbed", "0")  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    assert "1 of 1 searches" in res.stdout
+    assert len(list((tmp_path / "t").glob("*.npz"))) == 1 and (tmp_path / "t" / "index.json").is_file()
+    res = invoke("train", "student", "--teacher", tmp_path / "nothing", "-o", tmp_path / "s")
+    assert res.returncode == 1 and "no teacher records" in res.stderr and "Traceback" not in res.stderr
+    res = invoke("train", "student", "--teacher", tmp_path / "t", "-o", tmp_path / "s", "--dagger-rounds", "1",
+                 "--steps", "50")  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    assert "DAgger 1" in res.stdout and (tmp_path / "s" / "dagger1" / "policy.safetensors").is_file()
+    res = invoke("train", "student", "--teacher", tmp_path / "t", "-o", tmp_path / "s")
+    assert res.returncode == 1 and "Traceback" not in res.stderr  # an output folder in use is never replaced

@@ -6,8 +6,19 @@ import numpy as np
 import pytest
 
 from physmotion.imitator.clips import ClipSource
-from physmotion.imitator.student import (Carried, StudentConfig, carry, dagger_labels, dagger_steps, fit_student,
-                                         save_student, student_policy, student_settings, teacher_pairs, card)  # fmt: skip
+from physmotion.imitator.student import (
+    Carried,
+    StudentConfig,
+    card,
+    carry,
+    dagger_labels,
+    dagger_steps,
+    fit_student,
+    save_student,  # fmt: skip
+    student_policy,
+    student_settings,
+    teacher_pairs,
+)
 from physmotion.imitator.teacher import TeacherConfig, load_teacher_set
 from physmotion.physics.policy import load_policy
 from physmotion.physics.projection import prepare_motion
@@ -96,3 +107,17 @@ def test_dagger_labels_are_local_and_seeded(fitted, records) -> None:
     # The label is the search's choice around the student's proposal: it differs from the proposal somewhere.
     proposal = np.clip(policy.network(x1), -1.0, 1.0)
     assert np.abs(y1 - proposal).max() > 1e-3
+
+
+def test_p_runs_an_amortized_search_with_the_student_proposing(fitted, records, run_clip, tmp_path) -> None:
+    from physmotion.physics.projection import ProjectionConfig, project
+
+    config, weights, stats, _ = fitted
+    folder = save_student(tmp_path / "student", weights, student_settings(config), card(config, "BC", records, stats))
+    tiny = SearchConfig(candidates=2, rounds=1, elites=1, horizon=3, retries=0, rollback=0, seed=1)
+    joints = run_clip.joints[:20].astype(np.float64)
+    alone = project(joints, 20.0, ProjectionConfig().with_controller("search", search=tiny))
+    guided = project(joints, 20.0, ProjectionConfig().with_controller("search", policy=str(folder), search=tiny))
+    assert np.all(guided.residual_force == 0.0) and np.all(guided.residual_torque == 0.0)  # still no hand
+    # With two candidates, the first is the student's proposal: the committed offsets change with it.
+    assert np.abs(guided.teacher_offsets - alone.teacher_offsets).max() > 1e-3
