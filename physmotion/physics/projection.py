@@ -101,7 +101,8 @@ class ProjectionConfig:
         if self.controller not in CONTROLLERS:
             raise ShapeError(f"controller must be one of {', '.join(CONTROLLERS)}, got {self.controller!r}")
         if self.ilc_passes and self.reset_on_fail:  # a reset or a moved reference is no error to learn from
-            raise ShapeError("ilc_passes needs the plain projection (reset_on_fail off)")
+            raise ShapeError("ilc_passes needs a projection that does not reset the body where it falls "
+                             "(the plain preset)")
         if self.ilc_passes and self.controller == "search":  # the search corrects the body itself, per window
             raise ShapeError("ilc_passes is for the tracker and the policy, not the search controller")
 
