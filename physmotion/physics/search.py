@@ -271,11 +271,15 @@ class SearchController:
         record.qvel = states[:, self._qvel_at : self._qvel_at + model.nv].copy()
         return roll, record
 
-    def window(self, ref: Reference, state: np.ndarray, k: int, mean: np.ndarray, seed: int) -> np.ndarray:
+    def window(self, ref: Reference, state: np.ndarray, k: int, mean: np.ndarray, seed: int,
+               temperature: float | None = None) -> np.ndarray:  # fmt: skip
         """The offsets (63,) rad that one window's search (this controller's effort, no retries) commits
         from ``state`` (a full-physics state, ``mj_getState``) at control step ``k`` of ``ref``, its first
-        round centred on ``mean`` (63,); the labels of a student's own states (DAgger). Deterministic in
-        ``seed``."""
+        round centred on ``mean`` (63,): the labels of a student's own states (DAgger). Deterministic in
+        ``seed``. With ``temperature``, instead one round whose candidates are averaged with the weights
+        exp(-(cost - least) / (temperature x (median - least))) (MPPI's path-integral weighting, scaled by the
+        spread of the costs): with the same seed for every state (common random numbers) the label is a
+        smooth function of the state, where the best candidate jumps between unlike offsets."""
         if getattr(self, "_planned", (None,))[0] is not ref:  # nominal controls and goal, once per reference
             nominal = np.stack([self.tracker.act(None, ref, j)[0] for j in range(len(ref.qpos))])
             self._planned = (ref, nominal, SearchGoal(ref, self.config))
@@ -283,10 +287,18 @@ class SearchController:
         w = min(self.config.window, len(ref.qpos) - 1 - k)
         if w < 1:
             return np.zeros(self.model.nu)
+        cfg, rng = self.config, np.random.default_rng(seed)
+        mean = np.asarray(mean, dtype=float)
         record = SearchRecord(np.zeros(0), np.zeros(0), np.zeros(0))
-        found = self._search(state, nominal, goal, k, w, np.asarray(mean, dtype=float), np.asarray(mean, dtype=float),
-                             self.config, np.random.default_rng(seed), record)  # fmt: skip
-        return found.offset
+        if temperature is None:
+            return self._search(state, nominal, goal, k, w, mean, mean, cfg, rng, record).offset
+        cand = mean + cfg.sigma * self._spread * rng.standard_normal((cfg.candidates, len(mean)))
+        cand[0] = mean
+        _, _, step_cost, _, _ = self._candidates(state, nominal, goal, k, w, cand, mean, cfg, record)
+        total = step_cost.sum(axis=1)
+        spread = max(float(np.median(total) - total.min()), 1e-9)
+        weights = np.exp(-(total - total.min()) / (temperature * spread))
+        return (weights / weights.sum()) @ cand
 
     def _propose(self, state: np.ndarray, ref: Reference, k: int, last: np.ndarray, warm: float) -> np.ndarray:
         """The proposal's offsets (63,) rad at the committed state ``state`` of control step ``k``; a
@@ -302,15 +314,6 @@ class SearchController:
 
     # --- the search of one window ------------------------------------------------------------------------
     def _search(self, state, nominal, goal, k, w, mean, last, cfg: SearchConfig, rng, record) -> _Candidate:
-        from mujoco import rollout
-
-        n = len(nominal)
-        h = min(cfg.horizon, n - 1 - k - w)
-        steps = w + h
-        scale = np.concatenate([np.ones(w), cfg.decay ** np.arange(1, h + 1)])  # (steps,)
-        # Weight of the candidate against the last committed offset per step: 1 once blended in.
-        blend = np.minimum(1.0, np.arange(1, steps + 1) / max(cfg.blend, 1))[:, None]  # (steps, 1)
-        base = nominal[k : k + steps]  # nominal[j]: the tracker's targets over control step j -> j+1
         mu, sigma = mean.copy(), cfg.sigma * self._spread
         best = None
         for _ in range(cfg.rounds):
@@ -321,14 +324,8 @@ class SearchController:
                 cand[1] = 0.0 if self.proposal is None else cfg.warm * last
             else:
                 cand[1] = best.offset  # keep the best so far
-            applied = (blend * cand[:, None, :] + (1 - blend) * last) * scale[None, :, None]  # (C, steps, nu)
-            ctrl = np.repeat(base[None] + applied, self.substeps, axis=1)
-            init = np.repeat(state[None], cfg.candidates, axis=0)
-            out, _ = rollout.rollout(self.model, self._datas, init, ctrl)
-            record.rollouts += cfg.candidates
-            record.sim_steps += cfg.candidates * steps * self.substeps
-            at_ctrl = out[:, self.substeps - 1 :: self.substeps]  # (C, steps, nstate): after each control step
-            step_cost, fell, body_error = self._cost(at_ctrl, goal, k)
+            applied, at_ctrl, step_cost, fell, body_error = self._candidates(state, nominal, goal, k, w, cand, last,
+                                                                             cfg, record)  # fmt: skip
             total = step_cost.sum(axis=1)
             order = np.argsort(total, kind="stable")
             i = int(order[0])
@@ -339,6 +336,29 @@ class SearchController:
             elite = cand[order[: cfg.elites]]
             mu, sigma = elite.mean(axis=0), np.maximum(elite.std(axis=0), 0.1 * cfg.sigma * self._spread)
         return best
+
+    def _candidates(self, state, nominal, goal, k, w, cand, last, cfg: SearchConfig, record) -> tuple:
+        """Simulate candidate offsets cand (C, nu) from ``state`` over the window and its lookahead (one
+        ``mujoco.rollout`` call): (applied (C, S, nu), states after each control step (C, S, nstate), step
+        cost (C, S), fall flags (C, S), pelvis-relative body error (C, S))."""
+        from mujoco import rollout
+
+        n = len(nominal)
+        h = min(cfg.horizon, n - 1 - k - w)
+        steps = w + h
+        scale = np.concatenate([np.ones(w), cfg.decay ** np.arange(1, h + 1)])  # (steps,)
+        # Weight of the candidate against the last committed offset per step: 1 once blended in.
+        blend = np.minimum(1.0, np.arange(1, steps + 1) / max(cfg.blend, 1))[:, None]  # (steps, 1)
+        base = nominal[k : k + steps]  # nominal[j]: the tracker's targets over control step j -> j+1
+        applied = (blend * cand[:, None, :] + (1 - blend) * last) * scale[None, :, None]  # (C, steps, nu)
+        ctrl = np.repeat(base[None] + applied, self.substeps, axis=1)
+        init = np.repeat(state[None], len(cand), axis=0)
+        out, _ = rollout.rollout(self.model, self._datas, init, ctrl)
+        record.rollouts += len(cand)
+        record.sim_steps += len(cand) * steps * self.substeps
+        at_ctrl = out[:, self.substeps - 1 :: self.substeps]  # (C, steps, nstate): after each control step
+        step_cost, fell, body_error = self._cost(at_ctrl, goal, k)
+        return applied, at_ctrl, step_cost, fell, body_error
 
     def _cost(self, states: np.ndarray, goal: SearchGoal, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per-step cost (C, S), fall flags (C, S) and mean pelvis-relative body error (C, S), metres, of
