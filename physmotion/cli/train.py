@@ -93,8 +93,8 @@ def train_imitator_cmd(
                                     "mirrored copies included, is imitated; repeat for several."),
     motions: list[Path] = typer.Option([], help="Folder(s) of generated .npz motions (`generate --physics "
                                        "none`) to imitate as well: what P is asked to project."),
-    teacher: list[Path] = typer.Option([], help="Teacher folder(s) (`imitator teacher`): track the search's "
-                                       "trajectories with no outside hand (cap 0 throughout); the "
+    teacher: list[Path] = typer.Option([], help="Teacher folder(s) (experiments/teacher_data.py): track the "
+                                       "search's trajectories with no outside hand (cap 0 throughout); the "
                                        "observation keeps the kinematic reference. Not with --data or "
                                        "--motions."),
     warm_start: Path | None = typer.Option(None, "--warm-start", help="Policy folder the actor starts from "

@@ -114,7 +114,7 @@ def teacher_clips(folder: str | Path) -> list[ClipSource]:
             out.append(ClipSource(path.stem, joints, fps, tag, origin, TrackedTrajectory(qpos, qvel)))
     if not out:
         raise PhysmotionError(f"no teacher records with 2 or more carried steps in {root} "
-                              "(make them with `imitator teacher`)")  # fmt: skip
+                              "(experiments/teacher_data.py makes them)")  # fmt: skip
     return out
 
 
