@@ -6,6 +6,7 @@ trajectory the search carried them along, with no outside hand)."""
 from __future__ import annotations
 
 import csv
+import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -118,6 +119,11 @@ def teacher_clips(folder: str | Path) -> list[ClipSource]:
     return out
 
 
+def _held_out(segment: str) -> bool:
+    """One segment in 8 or so, by a stable hash of its name."""
+    return int(hashlib.sha1(segment.encode()).hexdigest(), 16) % 8 == 0
+
+
 def _segment(name: str) -> str:
     """A teacher record's segment: its id without the start's tag (``<source>_f<start>``)."""
     return name.rsplit("_", 1)[0]
@@ -139,8 +145,8 @@ def training_sets(data: list[str | Path], motions: list[str | Path], eval_clips:
                   teachers: list[str | Path] = ()) -> tuple[list[ClipSource], list[ClipSource]]:  # fmt: skip
     """The clips to train on and the fixed evaluation set, from dataset folders (their train splits; the
     evaluation takes unmirrored test items), folders of generated motions (every 8th is held out for
-    evaluation) and teacher folders (every 8th segment, each of its starts, is held out; evaluated as P runs,
-    on the kinematic reference from its first frame). The evaluation set, at most ``eval_clips``, is shared
+    evaluation) and teacher folders (one segment in 8 by a hash of its name, each of its starts, is held out;
+    evaluated as P runs, on the kinematic reference from its first frame). The evaluation set, at most ``eval_clips``, is shared
     evenly between the sources."""
     if not data and not motions and not teachers:
         raise PhysmotionError("give at least one --data, --motions or --teacher folder")
@@ -155,8 +161,10 @@ def training_sets(data: list[str | Path], motions: list[str | Path], eval_clips:
         clips += [c for i, c in enumerate(gen) if i % 8]
     for folder in teachers:
         records = teacher_clips(folder)
-        segments = sorted({_segment(c.name) for c in records})
-        held = set(segments[::8]) if len(segments) > 1 else set()  # a lone segment is trained on
+        segments = {_segment(c.name) for c in records}
+        # Held out by a hash of the segment's name, not its rank: a folder still being written keeps its
+        # held-out segments as it grows, so a resumed run never trains on what it evaluated on.
+        held = {s for s in segments if _held_out(s)} if len(segments) > 1 else set()
         evals += [c for c in records if _segment(c.name) in held and c.name.endswith("_plain")][:per_source]
         clips += [c for c in records if _segment(c.name) not in held]
     return clips, evals[:eval_clips]

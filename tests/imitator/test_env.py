@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from physmotion.imitator.clips import (ClipSource, TrackedTrajectory, dataset_clips, motion_clips,
-                                      teacher_clips)  # fmt: skip
+                                      teacher_clips, training_sets)  # fmt: skip
 from physmotion.imitator.env import Clip, EnvConfig, ImitationEnv
 from physmotion.imitator.train import ImitatorTrainConfig, no_hand_config
 from physmotion.imitator.vec_env import CapCurriculum
@@ -180,3 +180,18 @@ def test_no_hand_training_keeps_the_cap_at_zero() -> None:
     assert cfg.eval_caps == (0.0,) and s.cap == 0.0 and s.action_scale == 0.4
     assert capped_tracking(s.tracking, 1.0) == s.tracking and not s.tracking.feet_balance
     assert s.tracking.residual_force == s.tracking.residual_torque == s.tracking.residual_lift == 0.0
+
+
+def test_teacher_segments_held_out_stay_held_out_as_the_folder_grows(teacher_dir: Path, tmp_path: Path) -> None:
+    rec = _record(teacher_dir)
+    names = [f"walk{i}_f0_{start}" for i in range(40) for start in ("plain", "push0a1b2c")]
+    for name in names[:40]:
+        np.savez(tmp_path / f"{name}.npz", **rec)
+    train, evals = training_sets([], [], 100, [tmp_path])
+    for name in names[40:]:  # more records arrive while a run trains
+        np.savez(tmp_path / f"{name}.npz", **rec)
+    train2, evals2 = training_sets([], [], 100, [tmp_path])
+    held = {c.name for c in evals}
+    assert held and held <= {c.name for c in evals2} and all(n.endswith("_plain") for n in held)
+    assert not {c.name for c in train2} & {c.name for c in evals2}  # every start of a held segment is out
+    assert {c.name for c in train} <= {c.name for c in train2} and len(train) + 2 * len(held) >= 40
