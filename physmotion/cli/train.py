@@ -93,6 +93,17 @@ def train_imitator_cmd(
                                     "mirrored copies included, is imitated; repeat for several."),
     motions: list[Path] = typer.Option([], help="Folder(s) of generated .npz motions (`generate --physics "
                                        "none`) to imitate as well: what P is asked to project."),
+    teacher: list[Path] = typer.Option([], help="Teacher folder(s) (`train teacher`): track the "
+                                       "search's trajectories with no outside hand (cap 0 throughout); the "
+                                       "observation keeps the kinematic reference. Not with --data or "
+                                       "--motions."),
+    warm_start: Path | None = typer.Option(None, "--warm-start", help="Policy folder the actor starts from "
+                                           "(e.g. a behaviour-cloned student); its layer widths, action "
+                                           "scale and tracking are taken, the critic starts fresh."),
+    init_std: float | None = typer.Option(None, "--init-std", help="Initial spread of the Gaussian actions, "
+                                          "in action units (default: 0.3; with --warm-start, 0.1)."),
+    action_scale: float | None = typer.Option(None, "--action-scale", help="rad per unit action (default: "
+                                              "0.15; with --teacher, 0.5; --warm-start takes its own)."),
     out: Path = typer.Option(..., "-o", "--out", help="Run folder: checkpoint.pt, log.csv, eval.csv, "
                              "curves.png, policy/. Must be new or empty, unless --resume continues it."),
     minutes: float | None = typer.Option(None, help="Stop after this many minutes (at a checkpoint)."),
@@ -108,14 +119,28 @@ def train_imitator_cmd(
     resume: bool = typer.Option(False, "--resume", help="Continue the run in --out where it stopped."),
 ) -> None:
     """Train the imitation policy P can use (PPO, rsl-rl), in resumable chunks."""
-    from physmotion.imitator.clips import training_sets
-    from physmotion.imitator.train import ImitatorTrainConfig, train_imitator
+    from dataclasses import replace
 
-    clips, evals = training_sets(data, motions, eval_clips)
-    cfg = _with(ImitatorTrainConfig(), num_envs=envs, workers=workers, seed=seed)
+    from physmotion.imitator.clips import training_sets
+    from physmotion.imitator.train import ImitatorTrainConfig, no_hand_config, train_imitator
+
+    if teacher and (data or motions):
+        raise PhysmotionError("--teacher trains with no outside hand: give it without --data or --motions")
+    if warm_start is not None and action_scale is not None:
+        raise PhysmotionError("--warm-start takes its policy's action scale: leave out --action-scale")
+    clips, evals = training_sets(data, motions, eval_clips, teacher)
+    if init_std is None and warm_start is not None:
+        init_std = 0.1  # a small spread, so that the first iterations do not undo the warm start
+    cfg = _with(ImitatorTrainConfig(), num_envs=envs, workers=workers, seed=seed, init_std=init_std)
+    if teacher:
+        cfg = no_hand_config(cfg, **({} if action_scale is None else {"action_scale": action_scale}))
+    elif action_scale is not None:
+        settings = replace(cfg.env.settings, action_scale=action_scale)
+        cfg = replace(cfg, env=replace(cfg.env, settings=settings))
     policy_dir = train_imitator(out, clips, evals, iterations=iterations, minutes=minutes,
                                 resume=resume, config=cfg, device=device,
-                                sources=[str(p) for p in [*data, *motions]], log=console.print)  # fmt: skip
+                                sources=[str(p) for p in [*data, *motions, *teacher]], warm_start=warm_start,
+                                log=console.print)  # fmt: skip
     console.print(f"policy in {policy_dir}; use it with --controller policy --policy {policy_dir}",
                   highlight=False)
 

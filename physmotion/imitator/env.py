@@ -6,7 +6,13 @@ arithmetic: the tracker's PD targets plus ``action_scale`` x the action, the roo
 ``cap`` x the tracker's bounds. DeepMimic-style: reference state initialisation (a random start frame),
 early termination when the body leaves the reference, an imitation reward.
 
-Reward per control step, against reference step k+1 (weights in :class:`RewardConfig`):
+A clip may carry a tracked trajectory (:class:`~physmotion.imitator.clips.TrackedTrajectory`: the search's,
+from a teacher record): the observation's reference stays the kinematic one, what P gives the policy at
+deployment, but the reward, the early termination and the start states follow the tracked trajectory,
+which the body can follow with no outside hand (the kinematic reference it may not be able to).
+
+Reward per control step, against step k+1 of the reference (or of the tracked trajectory), with the weights
+of :class:`RewardConfig`:
 ``w_pos exp(-k_pos mean|dx|^2) + w_rot exp(-k_rot mean dq^2) + w_vel exp(-k_vel |dv_root|^2)
 + w_height exp(-k_height dz_root^2) + alive - w_residual (force/W + 0.2 torque/(W m)) - w_action mean a^2``,
 with dx the 22 bodies' position errors, dq the 63 hinge errors, dv the root velocity error.
@@ -19,10 +25,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from physmotion.errors import PhysmotionError
+from physmotion.imitator.clips import TrackedTrajectory
 from physmotion.physics.humanoid import HumanoidConfig, layout
 from physmotion.physics.policy import NUM_ACTIONS, PolicySettings, capped_tracking, observe
 from physmotion.physics.sim import control_step, mpjpe_of, reset_state
-from physmotion.physics.tracking import STANDARD_GRAVITY, ModelBasedTracker, prepare_reference
+from physmotion.physics.tracking import STANDARD_GRAVITY, ModelBasedTracker, Reference, prepare_reference
 from physmotion.physics.projection import PreparedMotion
 
 
@@ -41,7 +49,7 @@ class RewardConfig:
     alive: float = 0.15
     w_residual: float = 0.5
     w_action: float = 0.01
-    terminate_mpjpe: float = 0.3  # m: the episode ends when the bodies are this far from the reference
+    terminate_mpjpe: float = 0.3  # m: the episode ends when the bodies are this far from the goal
 
 
 @dataclass(frozen=True)
@@ -55,18 +63,45 @@ class EnvConfig:
 
 
 class Clip:
-    """A prepared motion with its tracker reference (computed once, reused by every episode on it)."""
+    """A prepared motion with its tracker reference (computed once, reused by every episode on it).
 
-    def __init__(self, prepared: PreparedMotion, config: EnvConfig) -> None:
+    ref: what the tracker and the observation follow, the kinematic reference (N steps). goal: what the
+    reward, the early termination and the start states follow: ``ref`` itself, or with ``tracked`` a
+    :class:`Reference` of its qpos (M, nq), qvel (M, nv) and bodies by forward kinematics (M, 22, 3), M <= N
+    (its ``tau_ff`` is unused, zeros).
+    """
+
+    def __init__(self, prepared: PreparedMotion, config: EnvConfig,
+                 tracked: TrackedTrajectory | None = None) -> None:  # fmt: skip
         self.model = prepared.model
         self.ref = prepare_reference(self.model, prepared.target, config.humanoid.control_dt,
                                      config.settings.tracking)  # fmt: skip
         self.weight = float(self.model.body_subtreemass[0]) * STANDARD_GRAVITY
         self.layout = layout(self.model)
+        self.tracked = tracked
+        self.goal = self.ref if tracked is None else self._goal(tracked)
+
+    def _goal(self, tracked: TrackedTrajectory) -> Reference:
+        import mujoco
+
+        m, n = len(tracked.qpos), len(self.ref.qpos)
+        nq, nv = self.model.nq, self.model.nv
+        if tracked.qpos.shape != (m, nq) or tracked.qvel.shape != (m, nv) or not 2 <= m <= n:
+            raise PhysmotionError(f"a tracked trajectory of qpos {tracked.qpos.shape} and qvel "
+                                  f"{tracked.qvel.shape} does not fit this humanoid (nq {nq}, nv {nv}) and "
+                                  f"its {n}-step reference")  # fmt: skip
+        data = mujoco.MjData(self.model)
+        bodies = np.zeros((m, len(self.layout.body_ids), 3))
+        for k, q in enumerate(tracked.qpos):
+            data.qpos[:] = q
+            mujoco.mj_kinematics(self.model, data)
+            bodies[k] = data.xpos[self.layout.body_ids]
+        return Reference(tracked.qpos, tracked.qvel, bodies, np.zeros_like(tracked.qvel))
 
     @property
     def steps(self) -> int:
-        return len(self.ref.qpos)
+        """Control steps an episode can run over: the goal's."""
+        return len(self.goal.qpos)
 
 
 class ImitationEnv:
@@ -82,15 +117,20 @@ class ImitationEnv:
         self.data = None  # mujoco.MjData of the current clip's model
 
     def reset(self, clip: Clip, frame: int, cap: float) -> np.ndarray:
-        """Put the humanoid on ``clip`` at control step ``frame`` with the residual cap ``cap``; the
-        observation (599,)."""
+        """Put the humanoid on ``clip``'s goal at control step ``frame`` with the residual cap ``cap``; the
+        observation (599,) against the kinematic reference."""
         import mujoco
 
         if self.clip is not clip:  # each environment simulates in its own MjData
             self.data = mujoco.MjData(clip.model)
         self.clip, self.k, self.start, self.cap = clip, frame, frame, float(cap)
         self._tracker = ModelBasedTracker(clip.model, capped_tracking(self.config.settings.tracking, cap))
-        reset_state(clip.model, self.data, clip.ref, frame)
+        if clip.tracked is None:
+            reset_state(clip.model, self.data, clip.ref, frame)
+        else:  # a simulated state: exactly as it was, not lifted out of the floor as a kinematic frame is
+            mujoco.mj_resetData(clip.model, self.data)
+            self.data.qpos[:], self.data.qvel[:] = clip.goal.qpos[frame], clip.goal.qvel[frame]
+            mujoco.mj_forward(clip.model, self.data)
         return observe(clip.model, self.data, clip.ref, frame, self.cap)
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, float]]:
@@ -101,13 +141,13 @@ class ImitationEnv:
         help_ = control_step(clip.model, self.data, clip.ref, controller, self.k, cfg.humanoid, clip.weight)
         force, torque = help_.force, help_.torque
         self.k += 1
-        k, data, ref = self.k, self.data, clip.ref
+        k, data, ref, goal = self.k, self.data, clip.ref, clip.goal
         bodies = data.xpos[clip.layout.body_ids]
-        dx2 = float(np.mean(np.sum((bodies - ref.joints_mj[k]) ** 2, axis=-1)))
-        mpjpe = mpjpe_of(data, clip.layout, ref.joints_mj[k])
-        dq2 = float(np.mean((data.qpos[7:] - ref.qpos[k, 7:]) ** 2))
-        dv2 = float(np.sum((data.qvel[:3] - ref.qvel[k, :3]) ** 2))
-        dz2 = float((data.qpos[2] - ref.qpos[k, 2]) ** 2)
+        dx2 = float(np.mean(np.sum((bodies - goal.joints_mj[k]) ** 2, axis=-1)))
+        mpjpe = mpjpe_of(data, clip.layout, goal.joints_mj[k])
+        dq2 = float(np.mean((data.qpos[7:] - goal.qpos[k, 7:]) ** 2))
+        dv2 = float(np.sum((data.qvel[:3] - goal.qvel[k, :3]) ** 2))
+        dz2 = float((data.qpos[2] - goal.qpos[k, 2]) ** 2)
         reward = (rw.w_pos * math.exp(-rw.k_pos * dx2) + rw.w_rot * math.exp(-rw.k_rot * dq2)
                   + rw.w_vel * math.exp(-rw.k_vel * dv2) + rw.w_height * math.exp(-rw.k_height * dz2)
                   + rw.alive - rw.w_residual * (force + 0.2 * torque)

@@ -150,7 +150,7 @@ def load_teacher_set(folder: str | Path) -> list[dict[str, np.ndarray]]:
     root = Path(folder)
     files = sorted(root.glob("*.npz"))
     if not files:
-        raise PhysmotionError(f"no teacher records in {root} (make them with `imitator teacher`)")
+        raise PhysmotionError(f"no teacher records in {root} (make them with `physmotion train teacher`)")
     out = []
     for f in files:
         with np.load(f) as z:

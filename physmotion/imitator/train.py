@@ -13,6 +13,11 @@ resumed therefore takes the same steps as one that was not, for the same clips, 
 A run folder holds ``checkpoint.pt``, ``log.csv`` (one row per iteration), ``eval.csv`` (one row per
 evaluation and cap), ``curves.png`` (with matplotlib) and ``policy/``: the exported policy that P loads
 (``policy.safetensors`` at most a few MB, ``settings.json``, ``card.json``).
+
+Warm start (``warm_start``): the actor starts as a policy folder's network (e.g. a student behaviour-cloned
+on the search's teacher records), so that at iteration 0 its mean action is that policy's; its action scale
+and tracker settings are taken; the critic starts fresh. Teacher clips (``clips.teacher_clips``) train with
+no outside hand (:func:`no_hand_config`): the cap is 0 in every episode and evaluation.
 """
 
 from __future__ import annotations
@@ -22,7 +27,7 @@ import json
 import os
 import platform
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -30,8 +35,8 @@ import numpy as np
 from physmotion.errors import PhysmotionError
 from physmotion.imitator.clips import ClipSource, licence_tags
 from physmotion.imitator.env import EnvConfig
-from physmotion.imitator.vec_env import EpisodeEnd, VecImitationEnv
-from physmotion.physics.policy import OBS_DIM, settings_dict
+from physmotion.imitator.vec_env import CapCurriculum, EpisodeEnd, VecImitationEnv
+from physmotion.physics.policy import OBS_DIM, PolicySettings, settings_dict
 
 
 @dataclass(frozen=True)
@@ -54,8 +59,94 @@ class ImitatorTrainConfig:
     chunk: int = 10  # iterations between checkpoints (and episode restarts, for exact resumption)
     eval_every: int = 5  # chunks between evaluations of the fixed clip set
     eval_caps: tuple[float, ...] = (0.25, 0.0)
+    cap_zero_share: float = 0.25  # episodes with no root residual at all (CapCurriculum.zero_share); 1: all
     fail_weight: float = 4.0  # a clip's sampling weight is 1 + fail_weight x its recent fall rate
     seed: int = 0
+
+
+def no_hand_config(base: ImitatorTrainConfig, action_scale: float = 0.5) -> ImitatorTrainConfig:
+    """``base`` with no outside hand anywhere: the tracker's root residual, lift and feet balance off
+    (:func:`~physmotion.physics.search.no_hand`), the cap 0 in every episode (the curriculum's zero share 1,
+    which its level cannot move) and evaluated at cap 0 only; offsets up to ``action_scale`` rad (the
+    search's committed offsets reach ~0.8 rad, 95 % under ~0.26 rad in the first teacher records).
+    A warm start replaces ``action_scale`` and the tracking with its own."""
+    from physmotion.physics.search import no_hand
+    from physmotion.physics.tracking import TrackingConfig
+
+    settings = PolicySettings(action_scale=action_scale, cap=0.0, tracking=no_hand(TrackingConfig()))
+    return replace(base, env=replace(base.env, settings=settings), eval_caps=(0.0,), cap_zero_share=1.0)
+
+
+def read_warm_start(folder: str | Path) -> tuple[dict[str, np.ndarray], PolicySettings]:
+    """A policy folder's raw weights (``obs_mean``, ``obs_std`` (599,), ``layers.{i}.weight`` (out, in),
+    ``layers.{i}.bias`` (out,)) and settings; PhysmotionError naming what is wrong."""
+    from safetensors.numpy import load_file
+
+    from physmotion.physics.policy import load_policy
+
+    policy = load_policy(folder)  # checks the files and the shapes
+    weights = load_file(str(Path(folder) / "policy.safetensors"))
+    if not np.all(weights["obs_std"] > 0):
+        raise PhysmotionError(f"cannot warm-start from {folder}: its obs_std has values <= 0")
+    return weights, policy.settings
+
+
+def _warm_config(cfg: ImitatorTrainConfig, weights: dict[str, np.ndarray], settings: PolicySettings
+                 ) -> ImitatorTrainConfig:  # fmt: skip
+    """``cfg`` with the warm start's hidden widths, action scale and tracking (its cap stays ``cfg``'s)."""
+    n = len({k.split(".")[1] for k in weights if k.startswith("layers.")})
+    hidden = tuple(int(weights[f"layers.{i}.bias"].shape[0]) for i in range(n - 1))
+    env_settings = replace(cfg.env.settings, action_scale=settings.action_scale, tracking=settings.tracking)
+    return replace(cfg, hidden_dims=hidden, env=replace(cfg.env, settings=env_settings))
+
+
+def _load_actor(alg, weights: dict[str, np.ndarray]) -> None:
+    """Copy a policy folder's network into rsl-rl's actor: its Linear layers and its observation
+    normaliser."""
+    import torch
+
+    actor = alg.actor
+    linears = [m for m in actor.mlp if isinstance(m, torch.nn.Linear)]
+    with torch.no_grad():
+        for i, lin in enumerate(linears):
+            lin.weight.copy_(torch.from_numpy(weights[f"layers.{i}.weight"]))
+            lin.bias.copy_(torch.from_numpy(weights[f"layers.{i}.bias"]))
+        norm = actor.obs_normalizer
+        # rsl-rl 5.5.1's EmpiricalNormalization normalises by (x - _mean) / (_std + eps) with buffers _mean,
+        # _var, _std of shape (1, 599) and a sample ``count``; exported, obs_std is _std + eps.
+        norm._mean.copy_(torch.from_numpy(weights["obs_mean"])[None])
+        norm._std.copy_(torch.from_numpy(weights["obs_std"])[None])
+        norm._var.copy_(norm._std**2)
+    _freeze(norm)
+
+
+def _freeze(norm) -> None:
+    """Freeze a warm-started actor's normaliser: eps 0, so that (x - mean) / std is the folder's exactly
+    (_std holds its obs_std, eps included), and ``until`` 0, so that update() returns at once (its
+    ``count >= until`` guard). Frozen rather than seeded: the warm-started first layer was fitted to these
+    statistics, and moving them would move every input it sees. Neither attribute is in the checkpoint's
+    state dict, so a resumed run freezes again."""
+    norm.eps = 0.0
+    norm.until = 0
+
+
+def make_algorithm(env: VecImitationEnv, cfg: ImitatorTrainConfig, device: str = "cpu",
+                   warm: dict[str, np.ndarray] | None = None):  # fmt: skip
+    """rsl-rl's PPO for ``env``: the actor at ``warm`` (a policy folder's weights, :func:`read_warm_start`;
+    its normaliser frozen) or, without, with a zero last layer, so that a zero action, the tracker, is where
+    training starts. The critic starts fresh either way."""
+    import torch
+    from rsl_rl.algorithms import PPO
+
+    alg = PPO.construct_algorithm(env.get_observations(), env, _rsl_cfg(cfg), device)
+    if warm is not None:
+        _load_actor(alg, warm)
+    else:
+        last = [m for m in alg.actor.mlp if isinstance(m, torch.nn.Linear)][-1]
+        with torch.no_grad():
+            last.weight.zero_()
+            last.bias.zero_()
+    return alg
 
 
 def _rsl_cfg(cfg: ImitatorTrainConfig) -> dict:
@@ -104,21 +195,28 @@ def train_imitator(
     config: ImitatorTrainConfig | None = None,
     device: str = "cpu",
     sources: list[str] | None = None,
+    warm_start: str | Path | None = None,
     log=print,
 ) -> Path:
     """Train (or resume) an imitation policy in the run folder ``out``; return the exported policy folder.
 
     Stops after ``iterations`` more iterations or once ``minutes`` have passed, whichever comes first, at a
-    chunk boundary. ``sources``: the data folders, for the card.
+    chunk boundary. ``sources``: the data folders, for the card. ``warm_start``: a policy folder the actor
+    starts from (its hidden widths, action scale and tracking replace ``config``'s; resuming, only those
+    settings are read, the weights being the checkpoint's).
     """
     import torch
 
     try:
-        from rsl_rl.algorithms import PPO
+        import rsl_rl  # noqa: F401
     except ImportError:
         raise PhysmotionError("training the imitator needs rsl-rl: pip install 'physmotion[train]'") from None
 
     cfg = config or ImitatorTrainConfig()
+    warm = None
+    if warm_start is not None:
+        warm, warm_settings = read_warm_start(warm_start)
+        cfg = _warm_config(cfg, warm, warm_settings)
     if iterations is None and minutes is None:
         raise PhysmotionError("give --iterations or --minutes")
     run = Path(out)
@@ -129,10 +227,12 @@ def train_imitator(
         raise PhysmotionError(f"nothing to resume: {ckpt_path} is missing")
     run.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(cfg.seed)
-    env = VecImitationEnv(clips, eval_clips, cfg.env, cfg.num_envs, cfg.workers, _stream(cfg.seed, 0))
+    env = VecImitationEnv(clips, eval_clips, cfg.env, cfg.num_envs, cfg.workers, _stream(cfg.seed, 0),
+                          CapCurriculum(zero_share=cfg.cap_zero_share))  # fmt: skip
     try:
-        alg = PPO.construct_algorithm(env.get_observations(), env, _rsl_cfg(cfg), device)
-        state = {"iteration": 0, "samples": 0, "wall_s": 0.0, "level": 0.0, "fails": np.zeros(len(clips))}
+        alg = make_algorithm(env, cfg, device, None if resume else warm)
+        state = {"iteration": 0, "samples": 0, "wall_s": 0.0, "level": 0.0, "fails": np.zeros(len(clips)),
+                 "warm_start": None if warm_start is None else str(warm_start)}  # fmt: skip
         if resume:
             saved = torch.load(ckpt_path, weights_only=False, map_location=device)
             # A checkpoint slimmed for travel may leave the optimiser out: Adam then starts afresh.
@@ -143,11 +243,8 @@ def train_imitator(
                 log(f"the run was trained on {saved['clips']} clips, these are {len(clips)}: clip sampling "
                     "weights start anew")  # fmt: skip
                 state["fails"] = np.zeros(len(clips))
-        else:
-            last = [m for m in alg.actor.mlp if isinstance(m, torch.nn.Linear)][-1]
-            with torch.no_grad():  # a zero action is the tracker: training starts exactly from it
-                last.weight.zero_()
-                last.bias.zero_()
+            if state.get("warm_start"):
+                _freeze(alg.actor.obs_normalizer)
         env.curriculum.level = state["level"]
         env.weights = 1.0 + cfg.fail_weight * state["fails"]
         started, stop_it = time.monotonic(), state["iteration"] + (iterations or 10**9)
@@ -303,6 +400,7 @@ def _export(run: Path, alg, cfg: ImitatorTrainConfig, state: dict, clips: list[C
             "generated_clips": sum(c.origin == "generated" for c in clips),
             "licence_tags": licence_tags(clips),
         },
+        "warm_start": state.get("warm_start"),
         "iterations": state["iteration"],
         "samples": state["samples"],
         "wall_minutes": round(state["wall_s"] / 60.0, 1),

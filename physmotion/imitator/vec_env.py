@@ -73,7 +73,8 @@ class VecImitationEnv:
     """``num_envs`` episodes over ``clips`` in ``workers`` processes (rsl-rl's VecEnv protocol)."""
 
     def __init__(self, clips: list[ClipSource], eval_clips: list[ClipSource], config: EnvConfig,
-                 num_envs: int, workers: int = 0, seed: int = 0) -> None:  # fmt: skip
+                 num_envs: int, workers: int = 0, seed: int = 0,
+                 curriculum: CapCurriculum | None = None) -> None:  # fmt: skip
         import torch
 
         if not clips:
@@ -86,7 +87,7 @@ class VecImitationEnv:
         self.episode_length_buf = torch.zeros(num_envs, dtype=torch.long)
         self.num_clips = len(clips)
         self.num_eval = len(eval_clips)
-        self.curriculum = CapCurriculum()
+        self.curriculum = curriculum or CapCurriculum()
         self.weights = np.ones(len(clips))
         n = max(1, min(workers or os.cpu_count() or 1, num_envs, len(clips)))
         self._split = np.array_split(np.arange(num_envs), n)
@@ -193,7 +194,8 @@ def _serve(pipe, w: int, n: int, num_envs: int) -> None:
     def clip(i: int) -> Clip:
         if i not in cache:
             s = sources[i]
-            cache[i] = Clip(prepare_motion(s.joints.astype(np.float64), s.fps, proj), config)
+            # the teacher's humanoid and shaping are P's plain ones, as ``proj``'s (TeacherConfig.projection)
+            cache[i] = Clip(prepare_motion(s.joints.astype(np.float64), s.fps, proj), config, s.tracked)
         return cache[i]
 
     envs = [ImitationEnv(config) for _ in range(num_envs)]

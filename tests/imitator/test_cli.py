@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -12,10 +13,31 @@ from tests.cli_runner import invoke
 
 def test_train_imitator_needs_data(tmp_path: Path) -> None:
     res = invoke("train", "imitator", "-o", tmp_path / "run", "--iterations", "1")
-    assert res.returncode == 1 and res.stderr.strip() == "error: give at least one --data or --motions folder"
+    assert res.returncode == 1 and res.stderr.strip() == "error: give at least one --data, --motions or --teacher folder"
     res = invoke("train", "imitator", "--data", tmp_path / "nothing", "-o", tmp_path / "run", "--iterations", "1")
     assert res.returncode == 1 and "not a dataset folder" in res.stderr and "Traceback" not in res.stderr
     assert not (tmp_path / "run").exists()
+
+
+def test_train_imitator_on_teacher_records_from_a_warm_start(teacher_dir: Path, tmp_path: Path) -> None:
+    from tests.imitator.test_train import _policy_folder
+
+    _policy_folder(tmp_path / "student")
+    res = invoke("train", "imitator", "--teacher", teacher_dir, "--data", teacher_dir, "-o", tmp_path / "run",
+                 "--iterations", "1")  # fmt: skip
+    assert res.returncode == 1 and "without --data or --motions" in res.stderr
+    assert not (tmp_path / "run").exists()
+    res = invoke("train", "imitator", "--teacher", teacher_dir, "--warm-start", tmp_path / "nothing",
+                 "-o", tmp_path / "run", "--iterations", "1")  # fmt: skip
+    assert res.returncode == 1 and "not an imitation policy folder" in res.stderr
+    assert "Traceback" not in res.stderr and not (tmp_path / "run").exists()
+    res = invoke("train", "imitator", "--teacher", teacher_dir, "--warm-start", tmp_path / "student",
+                 "-o", tmp_path / "run", "--iterations", "1", "--envs", "2", "--workers", "1")  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    card = json.loads((tmp_path / "run" / "policy" / "card.json").read_text())
+    settings = json.loads((tmp_path / "run" / "policy" / "settings.json").read_text())
+    assert card["warm_start"] == str(tmp_path / "student") and card["train_config"]["init_std"] == 0.1
+    assert settings["action_scale"] == 0.4 and settings["cap"] == 0.0
 
 
 def test_project_with_the_policy_reports_the_residual(small_built_dir: Path, tmp_path: Path) -> None:
