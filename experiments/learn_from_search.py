@@ -37,7 +37,7 @@ import numpy as np
 from experiments._results import markdown_table, parse_args, run_meta, write_results
 from experiments.search_quality import FAST_PROMPTS, HELDOUT_PROMPTS
 from physmotion.imitator.clips import dataset_clips
-from physmotion.imitator.student import StudentConfig, carry, prepared, train_student
+from physmotion.imitator.student import Expert, Labeller, StudentConfig, carry, prepared, train_student
 from physmotion.imitator.teacher import load_teacher_set
 from physmotion.physics.search import SearchConfig, effort
 
@@ -77,6 +77,8 @@ def _evaluate(job: tuple[str, dict, np.ndarray, float]) -> dict:
         if kind == "tracker":
             tracking = pconf.tracking if spec["hand"] else no_hand(pconf.tracking)
             controller = ModelBasedTracker(model, tracking)
+        elif kind == "expert":
+            controller = Expert(model, Labeller(), pconf.humanoid, pconf.tracking)
         else:
             controller = _policy(spec["folder"]).controller(model)
         c = carry(model, ref, controller, pconf.humanoid)
@@ -123,8 +125,12 @@ def main(argv: list[str] | None = None) -> dict:
     cfg = StudentConfig(seed=args.seed)
     teacher_cpu = round(sum(float(r["cpu_seconds"]) for r in records))
 
-    # (a) behaviour cloning, then DAgger with labels centred on the student's own proposal
-    folders = train_student(records, out, cfg, args.dagger_rounds, workers=args.workers)
+    # (a) the naive form: BC on the search's committed offsets; then BC and DAgger on consistent labels
+    naive = train_student(records, out / "search_labels", cfg, 0, Labeller(temperature=None), args.workers)
+    folders = {"BC on the search's choices": naive["BC"]}
+    for name, folder in train_student(records, out / "mppi_labels", cfg, args.dagger_rounds, Labeller(),
+                                      args.workers).items():  # fmt: skip
+        folders[f"{name} on MPPI labels"] = folder
     current = folders[list(folders)[-1]]
     fits = {name: json.loads((Path(f) / "card.json").read_text())["fit"] for name, f in folders.items()}
     pairs = fits[list(fits)[-1]]["pairs"]
@@ -143,6 +149,7 @@ def main(argv: list[str] | None = None) -> dict:
                              "tracker, hand off": {"kind": "tracker", "hand": False}}  # fmt: skip
     if args.full_search:
         rows["search default (full)"] = {"kind": "search", "config": effort("default", args.seed)}
+    rows["MPPI labeller as a controller (32 x 1, lookahead 15)"] = {"kind": "expert"}
     for name, folder in folders.items():
         rows[f"{name} student"] = {"kind": "policy", "folder": folder}
     if args.ppo:

@@ -228,18 +228,25 @@ def train_student_cmd(
     out: Path = typer.Option(..., "-o", "--out", help="Output folder: bc/ and dagger<r>/ policy folders; must be "
                              "new or empty."),
     dagger_rounds: int = typer.Option(2, help="Rounds of DAgger after behaviour cloning."),
+    labels: str = typer.Option("mppi", help="Who labels the states: 'mppi' (a deterministic, smooth function of "
+                               "the state: 32 candidates on common random numbers, averaged by their costs; its "
+                               "own episodes are the first data) or 'search' (the records' committed offsets, then "
+                               "a small search around the student's proposal)."),
     steps: int | None = typer.Option(None, help="Gradient steps per fit (default: 3000)."),
     workers: int = typer.Option(0, help="Processes for DAgger's episodes and labels (0: one per core)."),
     seed: int = typer.Option(0, help="Seed of the fit and the labels' searches."),
 ) -> None:
     """Learn a fast controller from the search's teacher records (no outside hand): BC, then DAgger."""
-    from physmotion.imitator.student import StudentConfig, train_student
+    from physmotion.imitator.student import Labeller, StudentConfig, train_student
     from physmotion.imitator.teacher import load_teacher_set
     from physmotion.paths import check_output
 
+    if labels not in ("mppi", "search"):
+        raise PhysmotionError(f"--labels must be mppi or search, got {labels!r}")
     check_output(out, "folder")
     records = load_teacher_set(teacher)
-    folders = train_student(records, out, _with(StudentConfig(seed=seed), steps=steps), dagger_rounds,
+    labeller = Labeller() if labels == "mppi" else Labeller(temperature=None, seed=seed)
+    folders = train_student(records, out, _with(StudentConfig(seed=seed), steps=steps), dagger_rounds, labeller,
                             workers=workers, log=console.print)  # fmt: skip
     last = folders[list(folders)[-1]]
     console.print(f"students in {out}; use the last with --controller policy --policy {last}, or as the "

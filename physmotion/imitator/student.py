@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -35,7 +36,7 @@ from physmotion.physics.policy import (
     settings_dict,
 )
 from physmotion.physics.search import SearchConfig, SearchController, SearchGoal, no_hand
-from physmotion.physics.tracking import Reference, TrackingConfig
+from physmotion.physics.tracking import ModelBasedTracker, Reference, TrackingConfig
 
 
 @dataclass(frozen=True)
@@ -216,20 +217,35 @@ def dagger_steps(carried: Carried, near: int = 45, every_near: int = 3, every_fa
     return far + [k for k in range(max(start, 0), end + 1, every_near)]
 
 
-def dagger_labels(model, ref: Reference, policy: Policy, states: np.ndarray, steps: Sequence[int],
-                  label: SearchConfig, humanoid: HumanoidConfig | None = None,
-                  seed: int = 0) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-    """Observations (M, 599) and action labels (M, 63) of the student's visited ``states`` (S, nstate; state
-    k at control step k) at control ``steps``: each labelled by a window of the search at effort ``label``
-    centred on the student's own proposal there (seeded by ``seed`` and the step)."""
+@dataclass(frozen=True)
+class Labeller:
+    """Who labels a state with the offsets to apply (63,) rad: one window of the search at ``effort``.
+
+    temperature set (the default): MPPI-style, the candidates drawn around 0 with the same ``seed`` for every
+    state (common random numbers) and averaged with weights exp(-(cost - least) / (temperature x (median -
+    least))): a deterministic, smooth function of the state, which a network can learn
+    (:meth:`SearchController.window`). None: the best candidate of a search centred on the student's own
+    proposal, seeded per state (its local improvement; measured no better in the decision entry)."""
+
+    effort: SearchConfig = SearchConfig(candidates=32, rounds=1, elites=2, horizon=15, retries=0, rollback=0)
+    temperature: float | None = 0.1
+    seed: int = 0
+
+
+def dagger_labels(model, ref: Reference, policy: Policy | None, states: np.ndarray, steps: Sequence[int],
+                  labeller: Labeller, humanoid: HumanoidConfig | None = None,
+                  action_scale: float = 0.3) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Observations (M, 599) and action labels (M, 63, offsets / ``action_scale`` clipped to [-1, 1]) of the
+    visited ``states`` (S, nstate; state k at control step k) at control ``steps``, by ``labeller``
+    (``policy``: the student whose proposal centres a search without temperature)."""
     import mujoco
 
     from physmotion.physics.policy import observe
 
-    search = SearchController(model, replace(label, threads=1), humanoid, policy.settings.tracking)
+    tracking = policy.settings.tracking if policy is not None else no_hand(TrackingConfig())
+    search = SearchController(model, replace(labeller.effort, threads=1), humanoid, tracking)
     data = mujoco.MjData(model)
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-    scale = policy.settings.action_scale
     xs, ys = [], []
     for k in steps:
         if k >= min(len(states), len(ref.qpos) - 1):
@@ -237,16 +253,53 @@ def dagger_labels(model, ref: Reference, policy: Policy, states: np.ndarray, ste
         mujoco.mj_setState(model, data, states[k], spec)
         mujoco.mj_forward(model, data)
         obs = observe(model, data, ref, k, 0.0)
-        proposal = scale * np.clip(policy.network(obs), -1.0, 1.0)
-        offset = search.window(ref, states[k], k, proposal, seed * 100_003 + k)
+        if labeller.temperature is not None:
+            offset = search.window(ref, states[k], k, np.zeros(model.nu), labeller.seed, labeller.temperature)
+        else:
+            scale = policy.settings.action_scale
+            proposal = scale * np.clip(policy.network(obs), -1.0, 1.0)
+            offset = search.window(ref, states[k], k, proposal, labeller.seed * 100_003 + k)
         xs.append(obs)
-        ys.append(np.clip(offset / scale, -1.0, 1.0))
+        ys.append(np.clip(offset / action_scale, -1.0, 1.0))
     if not xs:
         return np.zeros((0, OBS_DIM), np.float32), np.zeros((0, NUM_ACTIONS), np.float32)
     return np.stack(xs).astype(np.float32), np.stack(ys).astype(np.float32)
 
 
-LABEL_EFFORT = SearchConfig(candidates=16, rounds=2, elites=4, horizon=10, retries=0, rollback=0)
+class Expert:
+    """The labeller as a controller (:class:`~physmotion.physics.tracking.Controller`): every ``window``
+    control steps it labels the current state and holds that offset over the window, on the tracker with
+    every outside help off. What its labels are worth when acted on; its visited states and labels are a
+    student's first data."""
+
+    def __init__(self, model, labeller: Labeller, humanoid: HumanoidConfig | None = None,
+                 tracking: TrackingConfig | None = None) -> None:  # fmt: skip
+        import mujoco
+
+        self.model, self.labeller = model, labeller
+        self.tracker = ModelBasedTracker(model, no_hand(tracking or TrackingConfig()))
+        self.search = SearchController(model, replace(labeller.effort, threads=1), humanoid, tracking)
+        self.offset = np.zeros(model.nu)
+        self._spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        self._state = np.empty(mujoco.mj_stateSize(model, self._spec))
+        self.labels: dict[int, np.ndarray] = {}  # control step -> the offset labelled there
+
+    def act(self, data, ref: Reference, k: int) -> tuple[np.ndarray, np.ndarray]:
+        import mujoco
+
+        if k % self.labeller.effort.window == 0:
+            mujoco.mj_getState(self.model, data, self._state, self._spec)
+            mean = np.zeros(self.model.nu)
+            self.offset = self.search.window(ref, self._state, k, mean, self.labeller.seed, self.labeller.temperature)
+            self.labels[k] = self.offset
+        ctrl, qfrc = self.tracker.act(data, ref, k)
+        return ctrl + self.offset, qfrc
+
+    def residual(self, data, ref: Reference, step: int, substeps: int) -> np.ndarray:
+        return self.tracker.residual(data, ref, step, substeps)
+
+    def caps(self) -> tuple[float, float, float]:
+        return self.tracker.caps()
 
 
 def prepared(joints: np.ndarray, fps: float) -> tuple:
@@ -262,24 +315,34 @@ def prepared(joints: np.ndarray, fps: float) -> tuple:
 
 
 def train_student(records: Sequence[dict], out: str | Path, config: StudentConfig | None = None,
-                  dagger_rounds: int = 2, label: SearchConfig = LABEL_EFFORT, workers: int = 0,
+                  dagger_rounds: int = 2, labeller: Labeller | None = None, workers: int = 0,
                   log=print) -> dict[str, str]:  # fmt: skip
-    """Behaviour cloning on ``records``, then ``dagger_rounds`` rounds of DAgger (the student drives every
-    record's reference from its start; :func:`dagger_steps` of its visited states are labelled by
-    :func:`dagger_labels`; refit on all pairs). Each student is written as a policy folder,
-    ``out/bc`` and ``out/dagger<r>``. Returns {name: folder}; each card holds the fit and, for DAgger, the
-    share of control steps the previous student survived on the training records."""
+    """A student from ``records``' references: behaviour cloning, then ``dagger_rounds`` rounds of DAgger
+    (the student drives every record's reference from its start, pushed as the record was; its visited states
+    at :func:`dagger_steps` are labelled by ``labeller``; refit on all pairs). With a temperature, the first
+    data are the :class:`Expert`'s own episodes; without, the search's committed offsets in the records.
+    Each student is written as a policy folder, ``out/bc`` and ``out/dagger<r>``. Returns {name: folder};
+    each card holds the fit and, for DAgger, the share of control steps the previous student survived."""
     from physmotion.physics.workers import map_in_workers
 
-    cfg = config or StudentConfig()
+    cfg, lab = config or StudentConfig(), labeller or Labeller()
     root = Path(out)
-    x, y, g = teacher_pairs(records, cfg.action_scale)
+    if lab.temperature is not None:
+        got = map_in_workers(partial(_expert_one, labeller=lab, action_scale=cfg.action_scale), list(records),
+                             workers)  # fmt: skip
+        x, y = np.concatenate([a for a, _, _, _ in got]), np.concatenate([b for _, b, _, _ in got])
+        g = np.concatenate([np.full(len(a), i) for i, (a, _, _, _) in enumerate(got)])
+        done = sum(s == n for _, _, s, n in got)
+        log(f"expert: {done} of {len(got)} records to the end, {len(x)} labelled states")
+    else:
+        x, y, g = teacher_pairs(records, cfg.action_scale)
     weights, stats = fit_student(x, y, g, cfg)
     folders = {"BC": str(save_student(root / "bc", weights, student_settings(cfg), card(cfg, "BC", records, stats)))}
     log(f"BC: {len(x)} pairs, validation MSE {stats['val_mse']:.3f} (0 predicted: {stats['val_mse_zero']:.3f})")
     for r in range(1, dagger_rounds + 1):
-        jobs = [(rec, folders[list(folders)[-1]], cfg.seed * 1000 + r * 100 + i, label) for i, rec in enumerate(records)]
-        got = map_in_workers(_dagger_one, jobs, workers)
+        step = partial(_dagger_one, labeller=replace(lab, seed=lab.seed if lab.temperature is not None else
+                                                     cfg.seed * 1000 + r), action_scale=cfg.action_scale)  # fmt: skip
+        got = map_in_workers(step, [(rec, folders[list(folders)[-1]]) for rec in records], workers)
         x = np.concatenate([x] + [a for a, _, _, _ in got])
         y = np.concatenate([y] + [b for _, b, _, _ in got])
         g = np.concatenate([g] + [np.full(len(a), i) for i, (a, _, _, _) in enumerate(got)])
@@ -294,15 +357,39 @@ def train_student(records: Sequence[dict], out: str | Path, config: StudentConfi
     return folders
 
 
-def _dagger_one(job: tuple[dict, str, int, SearchConfig]) -> tuple[np.ndarray, np.ndarray, int, int]:
+def _expert_one(record: dict, labeller: Labeller, action_scale: float) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """A record's reference driven by the :class:`Expert`: its labelled states, steps survived, steps."""
+    from physmotion.physics.policy import observe
+
+    model, ref, pconf = prepared(record["joints"], float(record["fps"]))
+    expert = Expert(model, labeller, pconf.humanoid, pconf.tracking)
+    c = carry(model, ref, expert, pconf.humanoid, push=record["push"])
+    import mujoco
+
+    data, spec = mujoco.MjData(model), mujoco.mjtState.mjSTATE_FULLPHYSICS
+    xs, ys = [], []
+    for k, offset in sorted(expert.labels.items()):
+        if k >= len(c.states):
+            break
+        mujoco.mj_setState(model, data, c.states[k], spec)
+        mujoco.mj_forward(model, data)
+        xs.append(observe(model, data, ref, k, 0.0))
+        ys.append(np.clip(offset / action_scale, -1.0, 1.0))
+    x = np.stack(xs).astype(np.float32) if xs else np.zeros((0, OBS_DIM), np.float32)
+    y = np.stack(ys).astype(np.float32) if ys else np.zeros((0, NUM_ACTIONS), np.float32)
+    return x, y, c.survived, c.steps
+
+
+def _dagger_one(job: tuple[dict, str], labeller: Labeller, action_scale: float) -> tuple[np.ndarray, np.ndarray, int, int]:
     """A training record driven by the student in a policy folder: its labelled pairs, steps survived, steps."""
     from physmotion.physics.policy import load_policy
 
-    record, folder, seed, label = job
+    record, folder = job
     model, ref, pconf = prepared(record["joints"], float(record["fps"]))
     pol = load_policy(folder)
     c = carry(model, ref, pol.controller(model), pconf.humanoid, push=record["push"])
-    x, y = dagger_labels(model, ref, pol, c.states, dagger_steps(c), label, pconf.humanoid, seed=seed)
+    steps = dagger_steps(c) if labeller.temperature is None else dagger_steps(c, every_far=3)
+    x, y = dagger_labels(model, ref, pol, c.states, steps, labeller, pconf.humanoid, action_scale)
     return x, y, c.survived, c.steps
 
 

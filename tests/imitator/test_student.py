@@ -6,19 +6,9 @@ import numpy as np
 import pytest
 
 from physmotion.imitator.clips import ClipSource
-from physmotion.imitator.student import (
-    Carried,
-    StudentConfig,
-    card,
-    carry,
-    dagger_labels,
-    dagger_steps,
-    fit_student,
-    save_student,  # fmt: skip
-    student_policy,
-    student_settings,
-    teacher_pairs,
-)
+from physmotion.imitator.student import (Carried, Expert, Labeller, StudentConfig, card, carry, dagger_labels,
+                                         dagger_steps, fit_student, save_student, student_policy, student_settings,
+                                         teacher_pairs)  # fmt: skip
 from physmotion.imitator.teacher import TeacherConfig, load_teacher_set
 from physmotion.physics.policy import load_policy
 from physmotion.physics.projection import prepare_motion
@@ -97,10 +87,10 @@ def test_dagger_labels_are_local_and_seeded(fitted, records) -> None:
     r = records[0]
     model, ref, pconf = _prepared(r["joints"], float(r["fps"]))
     c = carry(model, ref, policy.controller(model), pconf.humanoid, push=r["push"])
-    label = SearchConfig(candidates=6, rounds=1, elites=2, horizon=4, retries=0, rollback=0)
+    label = Labeller(SearchConfig(candidates=6, rounds=1, elites=2, horizon=4, retries=0, rollback=0), None, 3)
     steps = dagger_steps(c, near=9, every_near=3, every_far=6)[:4]
-    x1, y1 = dagger_labels(model, ref, policy, c.states, steps, label, pconf.humanoid, seed=3)
-    x2, y2 = dagger_labels(model, ref, policy, c.states, steps, label, pconf.humanoid, seed=3)
+    x1, y1 = dagger_labels(model, ref, policy, c.states, steps, label, pconf.humanoid, config.action_scale)
+    _, y2 = dagger_labels(model, ref, policy, c.states, steps, label, pconf.humanoid, config.action_scale)
     assert x1.shape == (len(steps), 599) and y1.shape == (len(steps), 63)
     np.testing.assert_array_equal(y1, y2)
     assert np.all(np.abs(y1) <= 1.0)
@@ -121,3 +111,31 @@ def test_p_runs_an_amortized_search_with_the_student_proposing(fitted, records, 
     assert np.all(guided.residual_force == 0.0) and np.all(guided.residual_torque == 0.0)  # still no hand
     # With two candidates, the first is the student's proposal: the committed offsets change with it.
     assert np.abs(guided.teacher_offsets - alone.teacher_offsets).max() > 1e-3
+
+
+def test_mppi_labels_are_a_smooth_function_of_the_state(run_clip: ClipSource) -> None:
+    # Common random numbers and averaged candidates: a state moved a little gets a label moved a little, where
+    # the best candidate of a random search jumps (the naive labels' noise).
+    model, ref, pconf = _prepared(run_clip.joints[:30], run_clip.fps)
+    c = carry(model, ref, ModelBasedTracker(model, pconf.tracking), pconf.humanoid)
+    near = c.states[6].copy()
+    near[1 + model.nq : 1 + model.nq + 6] += 0.01  # the root's velocity, 1 cm/s and 0.01 rad/s more
+    states = np.stack([c.states[6], near])
+    effort = SearchConfig(candidates=16, rounds=1, elites=2, horizon=8, retries=0, rollback=0)
+    labels = []
+    for s in states:
+        _, y = dagger_labels(model, ref, None, np.stack([s] * 7), [6], Labeller(effort, 0.1, 0), pconf.humanoid)
+        labels.append(y[0])
+    moved = float(np.abs(labels[0] - labels[1]).max())
+    assert np.abs(labels[0]).max() > 0.05 and moved < 0.25 * float(np.abs(labels[0]).max()), moved
+
+
+def test_the_expert_carries_further_than_the_bare_tracker(run_clip: ClipSource) -> None:
+    model, ref, pconf = _prepared(run_clip.joints[:50], run_clip.fps)
+    off = carry(model, ref, ModelBasedTracker(model, no_hand(pconf.tracking)), pconf.humanoid)
+    effort = SearchConfig(candidates=16, rounds=1, elites=2, horizon=10, retries=0, rollback=0)
+    expert = Expert(model, Labeller(effort, 0.1, 0), pconf.humanoid, pconf.tracking)
+    on = carry(model, ref, expert, pconf.humanoid)
+    assert on.survived > off.survived, (on.survived, off.survived)
+    last = on.survived if not on.completed else on.steps - 1  # the last control step it acted at
+    assert sorted(expert.labels) == list(range(0, last + 1, 3))  # a label every window of 3 steps
