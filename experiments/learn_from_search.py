@@ -2,19 +2,21 @@
 results/learn_from_search.md and .json.
 
 Usage: python -m experiments.learn_from_search [--teacher runs/teacher] [--data data_build/all] [--out runs/learn]
-       [--dagger-rounds 2] [--ppo runs/ppo_searched/policy] [--captured-test 10] [--max-seconds 5]
+       [--dagger-rounds 2] [--ppo-minutes 8 | --ppo FOLDER] [--captured-test 10] [--max-seconds 5]
 
-Training data: the teacher records in ``--teacher`` (experiments/teacher_data.py: the search over the train
-split's captured clips, mirrored, and over plain samples of Morph's synthetic prompts, plain and perturbed starts).
-Methods (physmotion/imitator/student.py):
-- BC: behaviour cloning of the search's committed offsets;
-- DAgger: ``--dagger-rounds`` rounds in which the student drives the body along every training reference and
-  the states it visits (every 3rd control step in the 1.5 s before its fall, every 9th before that) are labelled by one window of a small search
-  (16 candidates x 2 rounds, lookahead 10) centred on the student's own proposal; refit on all pairs;
+Training data: the teacher records in ``--teacher`` (``physmotion train teacher`` / experiments/teacher_data.py:
+the search over the train split's captured clips, mirrored, and over plain samples of Morph's synthetic prompts,
+plain and pushed starts). Methods (physmotion/imitator/student.py):
+- BC on the search's choices: behaviour cloning of the records' committed offsets (the naive form);
+- (a) BC and DAgger on consistent labels: the MPPI labeller (32 candidates on common random numbers, lookahead
+  15, averaged by exp(-cost / (0.1 x the costs' spread)): a deterministic, smooth function of the state) drives
+  each training reference (plain or pushed, as the record) and its labelled states are BC's data; then
+  ``--dagger-rounds`` rounds in which the student drives them and every 3rd state it visits is labelled; refit
+  on all pairs. The labeller as a controller is a row too;
 - amortized search: the search at small efforts (candidates x rounds, lookahead), its first round centred on
   the DAgger student's proposal, against the same efforts with no proposal: a curve of cost against success;
-- PPO (``--ppo``, trained by ``physmotion train imitator --teacher``, warm-started from BC): rsl-rl tracking the
-  searched trajectories, where given.
+- PPO (rsl-rl, ``--ppo-minutes`` of training here, or a folder given with ``--ppo``): tracking the searched
+  trajectories with no outside hand, observing the kinematic reference, warm-started from the last student.
 Evaluation, every row from the first frame with no outside hand unless the row says "hand on": the first
 ``--captured-test`` unmirrored clips of the dataset's test split (a take-level split: no take on both sides),
 at most ``--max-seconds`` each, and plain samples (4 s) of experiments.search_quality's FAST_PROMPTS and
@@ -112,9 +114,12 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--data", default="data_build/all")
     ap.add_argument("--out", default="runs/learn")
     ap.add_argument("--dagger-rounds", type=int, default=2)
-    ap.add_argument("--ppo", default=None)
+    ap.add_argument("--ppo", default=None, help="a PPO policy folder to evaluate (else one is trained here)")
+    ap.add_argument("--ppo-minutes", type=float, default=8.0, help="PPO training warm-started from the last "
+                    "student (0: none)")
     ap.add_argument("--captured-test", type=int, default=10)
     ap.add_argument("--max-seconds", type=float, default=5.0)
+    ap.add_argument("--prompts", type=int, default=12, help="how many of the 12 evaluation prompts")
     ap.add_argument("--full-search", action=argparse.BooleanOptionalAction, default=True)
     ap.add_argument("--workers", type=int, default=0)
     ap.add_argument("--seed", type=int, default=0)
@@ -132,6 +137,14 @@ def main(argv: list[str] | None = None) -> dict:
                                       args.workers).items():  # fmt: skip
         folders[f"{name} on MPPI labels"] = folder
     current = folders[list(folders)[-1]]
+    if args.ppo is None and args.ppo_minutes > 0:  # (c) PPO tracking the searched trajectories, warm from (a)
+        from physmotion.imitator.clips import training_sets
+        from physmotion.imitator.train import ImitatorTrainConfig, no_hand_config, train_imitator
+
+        clips, evals = training_sets([], [], 16, [args.teacher])
+        ppo_cfg = no_hand_config(replace(ImitatorTrainConfig(), init_std=0.1, workers=args.workers, seed=args.seed))
+        args.ppo = str(train_imitator(out / "ppo", clips, evals, minutes=args.ppo_minutes, config=ppo_cfg,
+                                      sources=[args.teacher], warm_start=current))  # fmt: skip
     fits = {name: json.loads((Path(f) / "card.json").read_text())["fit"] for name, f in folders.items()}
     pairs = fits[list(fits)[-1]]["pairs"]
     _policy.cache_clear()
@@ -141,7 +154,7 @@ def main(argv: list[str] | None = None) -> dict:
     motions = [("captured", c.joints[: int(args.max_seconds * c.fps)], c.fps) for c in test]
     from physmotion.generate import GenerateConfig, generate
 
-    prompts = list(FAST_PROMPTS.values()) + list(HELDOUT_PROMPTS.values())
+    prompts = (list(FAST_PROMPTS.values()) + list(HELDOUT_PROMPTS.values()))[: args.prompts]
     gen = generate(prompts, GenerateConfig(seconds=4.0, num=1, physics="none", seed=args.seed))
     motions += [("generated", m.joints, float(m.fps)) for m in gen.motions]
 
@@ -153,7 +166,8 @@ def main(argv: list[str] | None = None) -> dict:
     for name, folder in folders.items():
         rows[f"{name} student"] = {"kind": "policy", "folder": folder}
     if args.ppo:
-        rows["PPO on searched trajectories"] = {"kind": "policy", "folder": args.ppo}
+        rows[f"PPO on the searched trajectories, warm from {list(folders)[-1]}"] = {"kind": "policy",
+                                                                                   "folder": args.ppo}
     for name, conf in SMALL_EFFORTS.items():
         conf = replace(conf, seed=args.seed)
         rows[f"search {name}"] = {"kind": "search", "config": conf}
