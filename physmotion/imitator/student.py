@@ -398,4 +398,7 @@ def card(config: StudentConfig, method: str, records: Sequence[dict], stats: dic
     tags = sorted({str(r["licence_tag"]) for r in records if str(r["licence_tag"])})
     origins = sorted({str(r["origin"]) for r in records})
     return {"method": method, "config": asdict(config), "records": len(records), "origins": origins,
-            "licence_tags": tags, "fit": stats, "outside_help": "none (cap 0, no feet balance)"}  # fmt: skip
+            "licence_tags": tags, "fit": stats, "outside_help": "none (cap 0, no feet balance)",
+            # P runs a policy on its preset's humanoid and shaping; these are the ones it was trained on.
+            "humanoid_and_shaping": "the plain preset's (TeacherConfig.projection(): the default HumanoidConfig, "
+                                    "pyramidal cone, and ShapingConfig)"}  # fmt: skip

@@ -347,7 +347,7 @@ def test_ilc_settings_are_checked() -> None:
         ProjectionConfig(ilc_passes=-1)
     with pytest.raises(ShapeError, match="ilc_gain"):
         ProjectionConfig(ilc_gain=0.0)
-    with pytest.raises(ShapeError, match="reset_on_fail"):
+    with pytest.raises(ShapeError, match="does not reset the body where it falls"):
         ProjectionConfig.sampling(ilc_passes=1)
 
 
