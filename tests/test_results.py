@@ -316,6 +316,32 @@ def morph_retuned_quotes() -> list[str]:
     ]
 
 
+LEARN_ROWS = {  # the rows of results/learn_from_search.json the docs quote, by the words they use
+    "the bare tracker with its hand off": "tracker, hand off",
+    "the full search": "search default (full)",
+    "the MPPI labeller itself": "MPPI labeller as a controller (32 x 1, lookahead 15)",
+    "BC on the search's choices": "BC on the search's choices student",
+    "DAgger 2 on MPPI labels": "DAgger 2 on MPPI labels student",
+    "PPO warm from it": "PPO on the searched trajectories, warm from DAgger 2 on MPPI labels",
+    "a 16 x 2 search with the student proposing": "amortized: dagger2 + search 16x2, lookahead 10",
+    "the same search alone": "search 16x2, lookahead 10",
+}
+
+
+def learn_quotes() -> list[str]:
+    """Learning from the search (results/learn_from_search.json, teacher_data.json): per quoted row, carried to
+    the end on captured / generated motion, share survived, CPU seconds per second; the teacher set's size."""
+    rows = {r["row"]: r for r in _load("learn_from_search.json")["rows"]}
+    teacher = _load("teacher_data.json")
+    out = [f"{teacher['written']} searches, {sum(r['motion s'] for r in teacher['rows']):.0f} s of motion, "
+           f"{teacher['cpu_seconds']:.0f} CPU s"]  # fmt: skip
+    for words, name in LEARN_ROWS.items():
+        c, g = rows[name]["captured"], rows[name]["generated"]
+        out.append(f"{words}: {100 * c['completed']:.0f} % / {100 * g['completed']:.0f} % (survived "
+                   f"{c['survived']:.2f} / {g['survived']:.2f}, CPU {c['cpu_s_per_s']:.2f} / {g['cpu_s_per_s']:.2f} s per s)")
+    return out
+
+
 QUOTES = {  # which doc quotes which result file
     ("docs results", "evaluate"): evaluate_quotes,
     ("docs results", "bench"): bench_quotes,
@@ -345,6 +371,8 @@ QUOTES = {  # which doc quotes which result file
     ("morph card", "bench"): bench_quotes,
     ("results", "biomodiffuse"): biomodiffuse_quotes,
     ("imitator card", "imitator captured"): imitator_card_quotes,
+    ("results", "learn"): learn_quotes,
+    ("limitations", "learn"): learn_quotes,
 }
 
 
@@ -357,7 +385,7 @@ def _section(text: str, source: str) -> str:
              "new prompts": "new_prompts_default", "new prompts base": "new_prompts_base",
              "new prompts fine": "new_prompts_fine",
              "biomodiffuse": "results/biomodiffuse", "refine": "results/refine", "imitator": "results/imitator_",
-             "imitator captured": "results/imitator_captured"}
+             "imitator captured": "results/imitator_captured", "learn": "learn_from_search"}
     marker = files[source]
     return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
 
