@@ -2,13 +2,13 @@
 :class:`~physmotion.physics.policy.PolicyNetwork`) trained on the search's teacher records, with no outside
 hand (docs/decisions/projection.md: "learning from the search").
 
-- Behaviour cloning (:func:`fit_student`): observations -> the search's committed offsets, scaled by
-  ``action_scale`` and clipped to [-1, 1]; MSE; inputs standardised.
-- DAgger with local labels (:func:`dagger_round`): the student drives the body (hand off) along the training
-  references; the states it visits before it falls are labelled by one window of a small search whose first
-  round is centred on the student's own proposal (:meth:`SearchController.window`, seeded per state), so a
-  label is a local improvement of what the student does, not an unrelated random optimum (the naive labels'
-  noise: ../shared/notes/search-prototype.md).
+- Behaviour cloning (:func:`fit_student`): observations -> offsets, scaled by ``action_scale`` and clipped
+  to [-1, 1]; MSE; inputs standardised.
+- Labels (:class:`Labeller`): by default MPPI-style, a deterministic and smooth function of the state (common
+  random numbers, candidates averaged by their costs); or the search's best candidate around the student's
+  own proposal. The search's committed offsets themselves (:func:`teacher_pairs`) are the naive labels.
+- :func:`train_student`: BC on the :class:`Expert`'s (the labeller acting) episodes, then DAgger rounds: the
+  student drives the training references (hand off) and the states it visits are labelled.
 - :func:`carry`: one episode of any controller with no outside hand, ended by a fall as the search defines
   it (pelvis dropped or tipped against the reference), not by a world-position error.
 
@@ -359,13 +359,13 @@ def train_student(records: Sequence[dict], out: str | Path, config: StudentConfi
 
 def _expert_one(record: dict, labeller: Labeller, action_scale: float) -> tuple[np.ndarray, np.ndarray, int, int]:
     """A record's reference driven by the :class:`Expert`: its labelled states, steps survived, steps."""
+    import mujoco
+
     from physmotion.physics.policy import observe
 
     model, ref, pconf = prepared(record["joints"], float(record["fps"]))
     expert = Expert(model, labeller, pconf.humanoid, pconf.tracking)
     c = carry(model, ref, expert, pconf.humanoid, push=record["push"])
-    import mujoco
-
     data, spec = mujoco.MjData(model), mujoco.mjtState.mjSTATE_FULLPHYSICS
     xs, ys = [], []
     for k, offset in sorted(expert.labels.items()):

@@ -159,6 +159,7 @@ class SearchController:
 
         self.model = model
         self.proposal = proposal
+        self._planned: tuple | None = None  # (reference, nominal controls, goal) of the last window() call
         self.config = config or SearchConfig()
         self.humanoid = humanoid or HumanoidConfig()
         self.tracker = ModelBasedTracker(model, no_hand(tracking or TrackingConfig()))
@@ -280,7 +281,7 @@ class SearchController:
         exp(-(cost - least) / (temperature x (median - least))) (MPPI's path-integral weighting, scaled by the
         spread of the costs): with the same seed for every state (common random numbers) the label is a
         smooth function of the state, where the best candidate jumps between unlike offsets."""
-        if getattr(self, "_planned", (None,))[0] is not ref:  # nominal controls and goal, once per reference
+        if self._planned is None or self._planned[0] is not ref:  # nominal controls and goal, once per reference
             nominal = np.stack([self.tracker.act(None, ref, j)[0] for j in range(len(ref.qpos))])
             self._planned = (ref, nominal, SearchGoal(ref, self.config))
         _, nominal, goal = self._planned
