@@ -7,6 +7,7 @@ import os
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from physmotion.imitator.clips import ClipSource
 from physmotion.imitator.student import carry
@@ -103,3 +104,27 @@ class _Replay:
 
     def caps(self):
         return self.tracker.caps()
+
+
+@pytest.mark.slow
+def test_ray_runs_one_task_per_job_and_matches_local_processes(small_built_dir: Path, tmp_path: Path) -> None:
+    pytest.importorskip("ray", reason="Ray is the optional extra physmotion[ray]; make install has it")
+    import subprocess
+    import sys
+
+    # In its own process, as a user runs it (a Ray driver's start and shutdown stay out of the test process).
+    command = [sys.executable, "-m", "physmotion.cli", "train", "teacher", "--data", str(small_built_dir), "-o",
+               str(tmp_path / "ray"), "--jobs", "2", "--effort", "fast", "--perturbed", "0", "--ray", "local"]
+    res = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr
+    assert "2 of 2 searches" in res.stdout
+    local_command = [*command[:-2], "--workers", "1"]
+    local_command[local_command.index(str(tmp_path / "ray"))] = str(tmp_path / "local")
+    local = subprocess.run(local_command, capture_output=True, text=True, timeout=600)
+    assert local.returncode == 0, local.stderr
+    names = sorted(p.name for p in (tmp_path / "ray").glob("*.npz"))
+    assert len(names) == 2 and names == sorted(p.name for p in (tmp_path / "local").glob("*.npz"))
+    for name in names:  # the same search, whichever worker ran it
+        a, b = np.load(tmp_path / "ray" / name), np.load(tmp_path / "local" / name)
+        np.testing.assert_array_equal(a["offsets"], b["offsets"])
+        np.testing.assert_array_equal(a["qpos"], b["qpos"])
