@@ -48,7 +48,9 @@ class TeacherConfig:
 
     def projection(self) -> ProjectionConfig:
         """P's configuration whose humanoid, shaping and tracking the search runs with (the plain preset's,
-        every outside help off: :func:`physmotion.physics.search.no_hand`)."""
+        every outside help off: :func:`physmotion.physics.search.no_hand`). The humanoid keeps the plain
+        preset's pyramidal cone, not the elliptic one ``with_controller("search")`` gives P's search: it is
+        the humanoid a student then runs on under ``--controller policy``."""
         return ProjectionConfig(controller="search", search=replace(self.search, threads=1))
 
 
