@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from physmotion.errors import PhysmotionError
-from physmotion.physics.humanoid import HumanoidConfig
+from physmotion.physics.humanoid import HumanoidConfig, layout
 from physmotion.physics.policy import (
     NUM_ACTIONS,
     OBS_DIM,
@@ -180,8 +180,6 @@ def carry(model, ref: Reference, controller, humanoid: HumanoidConfig | None = N
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
     states = [_state(model, data, spec)]
     weight = float(model.body_subtreemass[0]) * STANDARD_GRAVITY
-    from physmotion.physics.humanoid import layout
-
     ids = layout(model).body_ids
     err, rel = [], []
     n = len(ref.qpos)
