@@ -48,13 +48,15 @@ def morph_synth_cmd(
     ilc: int | None = typer.Option(None, "--ilc", help=ILC_HELP),
     controller: str | None = typer.Option(None, help=CONTROLLER_HELP + " (default: tracker)"),
     policy: Path | None = typer.Option(None, help=POLICY_HELP),
+    captions: int | None = typer.Option(None, help="Generate a seeded random subset of this many distinct "
+                                        "train captions (a costly controller, a quick run) (default: all)."),
 ) -> None:
     """Generate motions for every train caption and refine each with the physics projection P (Morph)."""
     from physmotion.morph.synth import SynthConfig, synthesize
 
     with _as_options(ilc_passes="--ilc", controller="--controller"):  # SynthConfig checks P's settings
         cfg = _with(SynthConfig(), per_caption=per_caption, seed=seed, workers=workers, ilc_passes=ilc,
-                    controller=controller, policy=_opt_str(policy))  # fmt: skip
+                    controller=controller, policy=_opt_str(policy), captions=captions)  # fmt: skip
     report = synthesize(_model_dir(model), data, out, cfg, progress=sys.stderr.isatty())
     console.print(f"{out}: {report.done} new item(s), {report.total_done}/{report.planned} done in "
                   f"{report.seconds:.0f} s (sampling {report.sampling_seconds:.0f} s, physics "

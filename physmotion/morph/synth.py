@@ -72,8 +72,11 @@ class SynthConfig:
     ilc_passes: int = 0  # P with iterative learning control (ProjectionConfig.ilc_passes); 0: plain P
     controller: str = "tracker"  # P's controller (ProjectionConfig.controller): "tracker", "policy" or "search"
     policy: str | None = None  # the policy folder for "policy"; None: the shipped one
+    captions: int | None = None  # a seeded random subset of this many distinct captions; None: every one
 
     def __post_init__(self) -> None:
+        if self.captions is not None and self.captions < 1:
+            raise SynthError(f"--captions must be at least 1, got {self.captions}")
         self.projection()  # P's settings checked before any work (ShapeError, one line)
 
     def projection(self) -> ProjectionConfig:
@@ -127,6 +130,15 @@ def train_captions(data_dir: str | Path, split: str = "train") -> list[str]:
     return [c for c in seen if c]
 
 
+def caption_subset(captions: Sequence[str], n: int, seed: int) -> list[str]:
+    """A seeded random choice of ``n`` of ``captions`` (all if fewer), in their order: a small run over
+    the split's whole range of motion, where the split's own order groups captions by source."""
+    if n >= len(captions):
+        return list(captions)
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0xCA9]))
+    return [captions[i] for i in sorted(rng.choice(len(captions), size=n, replace=False))]
+
+
 def split_lengths(data_dir: str | Path, split: str = "train", max_length: int | None = None) -> np.ndarray:
     """Frames of every motion of a split (rows of its new_joint_vecs files, read from the .npy header);
     with ``max_length``, only the motions a training run with that max_length keeps (HumanML3D's filter:
@@ -166,8 +178,8 @@ def item_noise(seed: int, index: int, frames: int, dim: int) -> torch.Tensor:
 def _identity(info: dict) -> dict:
     """The synth.json fields a continued run must share."""
     keys = ("model_sha256", "feature_dim", "skeleton", "fps", "split", "per_caption", "seed", "tau",
-            "preprocess", "projection", "sampler", "max_frames", "items_planned", "plan_sha256",
-            "lengths")  # fmt: skip
+            "preprocess", "projection", "sampler", "max_frames", "captions", "items_planned",
+            "plan_sha256", "lengths")  # fmt: skip
     return {k: info.get(k) for k in keys}
 
 
@@ -316,6 +328,8 @@ def synthesize(
     texts = list(captions) if captions is not None else train_captions(data_dir, cfg.split)
     if not texts:
         raise SynthError(f"{data_dir}: no captions in its {cfg.split} split")
+    if cfg.captions is not None:
+        texts = caption_subset(texts, cfg.captions, cfg.seed)
     trained = net.trained_max_length
     lengths = split_lengths(data_dir, cfg.split, trained)  # the lengths the model trained on
     if not len(lengths):
@@ -331,6 +345,7 @@ def synthesize(
         "licence_tag": net.licence_tag, **_setting_sections(cfg.preprocess, projection, cfg.sampler),
         "max_frames": max_frames, "items_planned": len(plan), "plan_sha256": plan_sha,
         "lengths": "features",  # a planned length counts feature rows (docs/decisions/morph.md)
+        "captions": cfg.captions,
     }  # fmt: skip
     info = json.loads(json.dumps(info))  # tuples -> lists, as a re-read synth.json has them
     _check_resume(out, info)

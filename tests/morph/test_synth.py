@@ -16,7 +16,7 @@ from physmotion.errors import PhysmotionError
 from physmotion.features.humanml3d import extract_features
 from physmotion.morph.preprocess import correct_tilt, tilt_angle
 from physmotion.morph.selection import HELP_FIELDS, INDEX_FIELDS, select
-from physmotion.morph.synth import SUBDIRS, SynthConfig, split_lengths, synthesize
+from physmotion.morph.synth import SUBDIRS, SynthConfig, caption_subset, split_lengths, synthesize, train_captions
 
 CAPTIONS = ["a person walks forward", "a person jumps", "a person sits on a chair", "a person waves"]
 
@@ -158,6 +158,26 @@ def test_a_folder_older_than_a_setting_resumes(model, built_dir: Path, full: Pat
     (out / "synth.json").write_text(json.dumps(info))
     with pytest.raises(PhysmotionError, match=r"lengths: None there, features now"):
         run(model, built_dir, out)
+
+def test_a_caption_subset_is_seeded_and_part_of_the_folder(model, built_dir: Path, tmp_path: Path) -> None:
+    every = train_captions(built_dir)
+    picked = caption_subset(every, 3, seed=0)
+    assert picked == caption_subset(every, 3, seed=0) != caption_subset(every, 3, seed=1)
+    assert picked != every[:3] and len(set(picked)) == 3 and set(picked) <= set(every)
+    assert [every.index(c) for c in picked] == sorted(every.index(c) for c in picked)  # the split's order
+    assert caption_subset(every[:2], 3, seed=0) == every[:2]
+    out = tmp_path / "subset"
+    cfg = SynthConfig(sampler=SamplerConfig(steps=5), batch_size=3, max_frames=40, workers=1, captions=3)
+    report = synthesize(None, built_dir, out, cfg, model=model)
+    assert (report.planned, report.done) == (3, 3)
+    assert [r["caption"] for r in index_rows(out)] == picked
+    assert json.loads((out / "synth.json").read_text())["captions"] == 3
+    with pytest.raises(PhysmotionError, match=r"captions: 3 there, 4 now"):
+        synthesize(None, built_dir, out, SynthConfig(sampler=SamplerConfig(steps=5), max_frames=40, captions=4),
+                   model=model)  # fmt: skip
+    with pytest.raises(PhysmotionError, match="--captions must be at least 1"):
+        SynthConfig(captions=0)
+
 
 def test_lengths_are_drawn_from_the_motions_the_model_trained_on(model, built_dir: Path) -> None:
     # The shipped model's run kept every motion (--max-length 196); a run with --max-length 120 (the model
