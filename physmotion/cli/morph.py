@@ -36,6 +36,10 @@ ILC_HELP = ("Refine with P under iterative learning control, this many passes mo
             "'physmotion project --ilc'; each costs one more simulation) (default: 0).")
 
 
+CAPTIONS_HELP = ("Generate a seeded random subset of this many distinct train captions (a costly controller, a "
+                 "quick run) (default: all).")
+
+
 @morph_app.command("synth")
 def morph_synth_cmd(
     data: Path = typer.Option(..., help="HumanML3D-layout folder whose train captions are generated."),
@@ -48,8 +52,7 @@ def morph_synth_cmd(
     ilc: int | None = typer.Option(None, "--ilc", help=ILC_HELP),
     controller: str | None = typer.Option(None, help=CONTROLLER_HELP + " (default: tracker)"),
     policy: Path | None = typer.Option(None, help=POLICY_HELP),
-    captions: int | None = typer.Option(None, help="Generate a seeded random subset of this many distinct "
-                                        "train captions (a costly controller, a quick run) (default: all)."),
+    captions: int | None = typer.Option(None, help=CAPTIONS_HELP),
 ) -> None:
     """Generate motions for every train caption and refine each with the physics projection P (Morph)."""
     from physmotion.morph.synth import SynthConfig, synthesize
@@ -134,6 +137,9 @@ def morph_run_cmd(
     seed: int | None = typer.Option(None, help="Random seed of synthesis and fine-tuning (default: 0)."),
     floor: str | None = typer.Option(None, help=FLOOR_HELP),
     ilc: int | None = typer.Option(None, "--ilc", help=ILC_HELP),
+    controller: str | None = typer.Option(None, help=CONTROLLER_HELP + " (default: tracker)"),
+    policy: Path | None = typer.Option(None, help=POLICY_HELP),
+    captions: int | None = typer.Option(None, help=CAPTIONS_HELP),
 ) -> None:
     """Morph's multi-round loop: per round, synthesise and refine, select, fine-tune from the last round."""
     from physmotion.morph.finetune import FinetuneConfig
@@ -144,8 +150,9 @@ def morph_run_cmd(
     check_output(out, "folder", overwrite=True)
     model = _model_dir(model)
     check_run_dir(out, model)
-    with _as_options(ilc_passes="--ilc"):
-        synth_cfg = _with(SynthConfig(), per_caption=per_caption, seed=seed, ilc_passes=ilc)
+    with _as_options(ilc_passes="--ilc", controller="--controller"):
+        synth_cfg = _with(SynthConfig(), per_caption=per_caption, seed=seed, ilc_passes=ilc, controller=controller,
+                          policy=_opt_str(policy), captions=captions)  # fmt: skip
     ft_cfg = _with(FinetuneConfig(model="", synth="", data=str(data), out=""), steps=steps, mix=mix, lr=lr, seed=seed,
                    floor=floor)  # fmt: skip
     rows = run_rounds(model, data, out, rounds, synth_cfg, ft_cfg, progress=sys.stderr.isatty())

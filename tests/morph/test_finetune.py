@@ -194,5 +194,6 @@ def test_help_defaults_are_the_dataclasses() -> None:
     stated = _help_defaults("morph", "run")
     expected = {"per-caption": syn.per_caption, "steps": ft.steps, "mix": ft.mix, "lr": ft.lr, "seed": ft.seed,
                 "floor": ft.floor, "ilc": syn.ilc_passes}
+    assert syn.captions is None and stated.pop("captions") == "all"
     assert stated == {k: str(v) for k, v in expected.items()}
     assert _help_defaults("morph", "synth")["ilc"] == str(syn.ilc_passes)

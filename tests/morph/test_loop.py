@@ -50,3 +50,23 @@ def test_rounds_chain_weights_and_resume_by_round(tiny_model_dir: Path, built_di
         (other / f).write_bytes((out / "round_1" / "model" / f).read_bytes())
     with pytest.raises(PhysmotionError, match="another base model"):
         run_rounds(other, built_dir, out, 1, None, ft, progress=False, synthesize_fn=fake_synthesize)
+
+
+def test_run_passes_the_controller_and_the_caption_subset_to_every_round(monkeypatch, tmp_path: Path) -> None:
+    """``morph run --controller search --captions N``: each round's synthesis gets them (the rounds stand in)."""
+    import physmotion.morph.loop as loop
+    from tests.cli_runner import invoke
+
+    seen = {}
+
+    def fake_rounds(model, data, out, rounds, synth_cfg, ft_cfg, progress):
+        seen.update(controller=synth_cfg.controller, captions=synth_cfg.captions, rounds=rounds)
+        raise PhysmotionError("stopped here")
+
+    monkeypatch.setattr(loop, "run_rounds", fake_rounds)
+    common = ("morph", "run", "--model", "base", "--data", tmp_path, "--rounds", "1")
+    res = invoke(*common, "-o", tmp_path / "run", "--controller", "search", "--captions", "7")
+    assert seen == {"controller": "search", "captions": 7, "rounds": 1} and "stopped here" in res.stderr
+    res = invoke(*common, "-o", tmp_path / "run2", "--controller", "walker")
+    assert res.returncode == 1 and res.stderr.strip().splitlines() == [
+        "error: --controller must be one of tracker, policy, search, got 'walker'"]
