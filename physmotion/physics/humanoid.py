@@ -216,6 +216,9 @@ class HumanoidConfig:
     # has the figures of both).
     cone: str = "pyramidal"
     impratio: float = 1.0
+    # MuJoCo's noslip solver: this many iterations after the main solver take the slip out of the friction
+    # dimensions (soft contacts otherwise let loaded feet creep). 0: off, MuJoCo's default.
+    noslip: int = 0
     contact_excludes: tuple[tuple[str, str], ...] = DEFAULT_EXCLUDES
     heel_length: float = 0.061  # m behind the ankle (default body; scales with it); PHC's ankle box
     sole_below_toe: float = 0.0145  # m from the toe joint down to the sole (PHC's toe box)
@@ -444,7 +447,8 @@ def build_mjcf(offsets: np.ndarray | None = None, config: HumanoidConfig | None 
         '<mujoco model="physmotion_smpl22">',
         '  <compiler angle="radian" autolimits="true"/>',
         f'  <option timestep="{cfg.sim_dt:.10g}" integrator="{cfg.integrator}" solver="{cfg.solver}"'
-        f' iterations="{cfg.iterations}" cone="{cfg.cone}" impratio="{cfg.impratio:g}"/>',
+        f' iterations="{cfg.iterations}" cone="{cfg.cone}" impratio="{cfg.impratio:g}"'
+        f' noslip_iterations="{cfg.noslip}"/>',
         "  <default>",
         f'    <joint type="hinge" armature="{cfg.armature:g}" damping="0"'
         f' limited="{str(cfg.joint_limits).lower()}"/>',

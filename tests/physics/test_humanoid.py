@@ -58,6 +58,10 @@ def test_options_follow_config(default_model) -> None:
     assert m.opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     assert m.opt.solver == mujoco.mjtSolver.mjSOL_NEWTON
     assert m.opt.iterations == 50
+    assert m.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL and m.opt.impratio == 1.0 and m.opt.noslip_iterations == 0
+    other = build_model(config=HumanoidConfig(cone="elliptic", impratio=10.0, noslip=5))
+    assert other.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC and other.opt.impratio == 10.0
+    assert other.opt.noslip_iterations == 5
     assert HumanoidConfig().substeps == 12  # control at 30 Hz
     assert HumanoidConfig(sim_dt=1 / 240).substeps == 8
     with pytest.raises(ShapeError):
