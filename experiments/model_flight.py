@@ -88,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
         body = [[r["name"], f"{r['flying']} of {r['samples']}",
                  "-" if r["flight_median_m"] is None else f"{100 * r['flight_median_m']:.1f}",
                  "-" if r["flight_kept"] is None else f"{r['flight_kept']:.2f} ({r['compared']})",
-                 *(f"{1000 * r[k]:.1f}" for k in ("penetrate", "float", "skate", "phys_err"))] for r in rows]  # fmt: skip
+                 *(f"{r[k]:.1f}" for k in ("penetrate", "float", "skate", "phys_err"))] for r in rows]  # fmt: skip
         table = heading("Plain samples of jump and hop prompts, per model", meta) + markdown_table(header, body)
         return table, write_results(args.out, table, {"meta": meta, "rows": rows})
 

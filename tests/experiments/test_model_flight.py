@@ -25,7 +25,10 @@ def test_a_model_against_itself_keeps_all_its_flight(tmp_path: Path) -> None:
     assert first["flight_kept"] == again["flight_kept"] == 1.0
     assert other["flight_each_m"] != first["flight_each_m"] and other["compared"] == first["flying"]
     assert all(r["phys_err"] == pytest.approx(r["penetrate"] + r["float"] + r["skate"]) for r in rows)
-    assert "flight kept against base" in out.with_suffix(".md").read_text()
+    table = out.with_suffix(".md").read_text()
+    assert "flight kept against base" in table
+    # the physical metrics are in mm already: the table shows them as they are
+    assert f"| {first['phys_err']:.1f} |" in table.splitlines()[-3]
 
 
 def test_names_must_match_the_models(tmp_path: Path, capsys) -> None:
