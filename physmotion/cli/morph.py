@@ -36,6 +36,8 @@ ILC_HELP = ("Refine with P under iterative learning control, this many passes mo
             "'physmotion project --ilc'; each costs one more simulation) (default: 0).")
 
 
+RAY_HELP = ("Refine on Ray, one task per motion, on the cluster at this address, or 'local' to start one on "
+            "this machine, instead of --workers (needs pip install 'physmotion[ray]'; docs/cluster.md).")
 CAPTIONS_HELP = ("Generate a seeded random subset of this many distinct train captions (a costly controller, a "
                  "quick run) (default: all).")
 
@@ -53,13 +55,14 @@ def morph_synth_cmd(
     controller: str | None = typer.Option(None, help=CONTROLLER_HELP + " (default: tracker)"),
     policy: Path | None = typer.Option(None, help=POLICY_HELP),
     captions: int | None = typer.Option(None, help=CAPTIONS_HELP),
+    ray: str | None = typer.Option(None, help=RAY_HELP),
 ) -> None:
     """Generate motions for every train caption and refine each with the physics projection P (Morph)."""
     from physmotion.morph.synth import SynthConfig, synthesize
 
     with _as_options(ilc_passes="--ilc", controller="--controller"):  # SynthConfig checks P's settings
         cfg = _with(SynthConfig(), per_caption=per_caption, seed=seed, workers=workers, ilc_passes=ilc,
-                    controller=controller, policy=_opt_str(policy), captions=captions)  # fmt: skip
+                    controller=controller, policy=_opt_str(policy), captions=captions, ray=ray)  # fmt: skip
     report = synthesize(_model_dir(model), data, out, cfg, progress=sys.stderr.isatty())
     console.print(f"{out}: {report.done} new item(s), {report.total_done}/{report.planned} done in "
                   f"{report.seconds:.0f} s (sampling {report.sampling_seconds:.0f} s, physics "
@@ -140,6 +143,7 @@ def morph_run_cmd(
     controller: str | None = typer.Option(None, help=CONTROLLER_HELP + " (default: tracker)"),
     policy: Path | None = typer.Option(None, help=POLICY_HELP),
     captions: int | None = typer.Option(None, help=CAPTIONS_HELP),
+    ray: str | None = typer.Option(None, help=RAY_HELP),
 ) -> None:
     """Morph's multi-round loop: per round, synthesise and refine, select, fine-tune from the last round."""
     from physmotion.morph.finetune import FinetuneConfig
@@ -152,7 +156,7 @@ def morph_run_cmd(
     check_run_dir(out, model)
     with _as_options(ilc_passes="--ilc", controller="--controller"):
         synth_cfg = _with(SynthConfig(), per_caption=per_caption, seed=seed, ilc_passes=ilc, controller=controller,
-                          policy=_opt_str(policy), captions=captions)  # fmt: skip
+                          policy=_opt_str(policy), captions=captions, ray=ray)  # fmt: skip
     ft_cfg = _with(FinetuneConfig(model="", synth="", data=str(data), out=""), steps=steps, mix=mix, lr=lr, seed=seed,
                    floor=floor)  # fmt: skip
     rows = run_rounds(model, data, out, rounds, synth_cfg, ft_cfg, progress=sys.stderr.isatty())

@@ -20,13 +20,14 @@ counts half an item; a run on a folder with the same settings continues where it
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import hashlib
 import io
 import json
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from functools import partial
 from pathlib import Path
 
@@ -64,6 +65,7 @@ class SynthConfig:
     seed: int = 0  # noise of item i: (seed, i); lengths: one draw seeded by seed
     batch_size: int = 16  # samples per denoiser batch
     workers: int = 0  # physics worker processes, 0: one per core
+    ray: str | None = None  # refine on Ray at this address ("local": a Ray on this machine) instead of workers
     sampler: SamplerConfig = field(default_factory=ddim_50)  # the shipped Morph model's synthetic data
     tau: float = TAU  # Morph's selection threshold (App. B), also P's failure threshold
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
@@ -365,14 +367,13 @@ def synthesize(
     start = time.perf_counter()
     t_sample = t_phys = 0.0
     done = 0
-    with _bar(progress, len(plan), skipped) as tick:
+    with _session(cfg.ray), _bar(progress, len(plan), skipped) as tick:
         for b in range(0, len(todo), cfg.batch_size):
             batch = todo[b : b + cfg.batch_size]
             t0 = time.perf_counter()
             joints = _sample_batch(net, batch, cfg)
             t1 = time.perf_counter()
-            results = map_in_workers(partial(refine_item, preprocess_config=cfg.preprocess,
-                                             projection=projection), joints, cfg.workers)  # fmt: skip
+            results = _refine(joints, cfg, projection)
             for item, res in zip(batch, results):
                 rows.append(_write_item(out, item, res, net.licence_tag))
                 _write_index(out, rows)  # last: the item counts only once its files exist
@@ -383,6 +384,33 @@ def synthesize(
     return SynthReport(out=out, planned=len(plan), done=done, total_done=len(rows), skipped=skipped,
                        seconds=time.perf_counter() - start, sampling_seconds=t_sample,
                        physics_seconds=t_phys)  # fmt: skip
+
+
+def _session(ray: str | None):
+    """One Ray session for the whole run where ``ray`` is given (each batch's tasks join it)."""
+    if ray is None:
+        return contextlib.nullcontext()
+    from physmotion.physics.cluster import ray_session
+
+    return ray_session(ray)
+
+
+def _refine(joints: list[np.ndarray], cfg: SynthConfig, projection: ProjectionConfig) -> list[dict]:
+    """:func:`refine_item` of each motion of a batch, in order: on Ray (one task per motion) or in the
+    local worker processes."""
+    if cfg.ray is None:
+        return map_in_workers(partial(refine_item, preprocess_config=cfg.preprocess, projection=projection),
+                              joints, cfg.workers)  # fmt: skip
+    from physmotion.physics.cluster import map_on_ray
+
+    if projection.controller == "search" and not projection.search.threads:  # a task has one core
+        projection = replace(projection, search=replace(projection.search, threads=1))
+    fn = partial(refine_item, preprocess_config=cfg.preprocess, projection=projection)
+
+    results: list[dict] = [{}] * len(joints)
+    for i, res in map_on_ray(fn, joints, cfg.ray):
+        results[i] = res
+    return results
 
 
 def _sample_batch(net: MotionDiffusion, batch: list[PlannedItem], cfg: SynthConfig) -> list[np.ndarray]:

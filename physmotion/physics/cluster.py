@@ -8,6 +8,7 @@ dies loses its motion only, and the caller's re-run skips what is written.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from typing import TypeVar
 
 from physmotion.errors import PhysmotionError
@@ -16,12 +17,11 @@ T = TypeVar("T")
 R = TypeVar("R")
 
 
-def map_on_ray(fn: Callable[[T], R], items: Sequence[T], address: str = "local") -> Iterator[tuple[int, R]]:
-    """``(index, fn(item))`` for every item, in the order they finish, as Ray tasks of one CPU each.
-
-    address: "local" starts a Ray on this machine (every core) for the call and stops it after; any other
-    value is a running cluster's address ("auto", "ray://host:10001", "host:6379"), joined and left as it
-    was. ``fn`` and the items must pickle (cloudpickle: a module-level function or a partial of one)."""
+@contextmanager
+def ray_session(address: str = "local") -> Iterator[None]:
+    """Ray for the block: "local" starts one on this machine (every core), any other value joins a running
+    cluster ("auto", "ray://host:10001", "host:6379"). A session this started is stopped after; one already
+    running is left as it was, so :func:`map_on_ray` calls inside the block share it."""
     try:
         import ray
     except ImportError:
@@ -34,6 +34,19 @@ def map_on_ray(fn: Callable[[T], R], items: Sequence[T], address: str = "local")
         except (ConnectionError, RuntimeError, ValueError) as e:
             raise PhysmotionError(f"cannot reach a Ray cluster at {address!r}: {e}") from None
     try:
+        yield
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def map_on_ray(fn: Callable[[T], R], items: Sequence[T], address: str = "local") -> Iterator[tuple[int, R]]:
+    """``(index, fn(item))`` for every item, in the order they finish, as Ray tasks of one CPU each, in a
+    :func:`ray_session` at ``address``. ``fn`` and the items must pickle (cloudpickle: a module-level
+    function or a partial of one)."""
+    with ray_session(address):
+        import ray
+
         task = ray.remote(num_cpus=1, max_retries=1)(_call)  # a partial is no function to Ray: wrap it
         pending = {task.remote(fn, x): i for i, x in enumerate(items)}
         while pending:
@@ -45,9 +58,6 @@ def map_on_ray(fn: Callable[[T], R], items: Sequence[T], address: str = "local")
             except ray.exceptions.RayTaskError as e:  # the task's own exception, as a local run raises it
                 raise e.as_instanceof_cause() from None
             yield index, value
-    finally:
-        if started:
-            ray.shutdown()
 
 
 def _call(fn: Callable[[T], R], item: T) -> R:

@@ -219,3 +219,27 @@ def test_synth_with_the_search_keeps_teacher_records(model, built_dir: Path, tmp
     records = np.load(tmp_path / "s" / "teacher" / f"{row['id']}.npz")
     assert records["observations"].shape[1] == 599 and records["offsets"].shape[1] == 63
     assert str(records["text"]) == "a person jumps" and str(records["licence_tag"]) == row["licence_tag"]
+
+
+@pytest.mark.slow
+def test_ray_refines_what_local_processes_do(built_dir: Path, tmp_path: Path) -> None:
+    """``morph synth --ray local``: one Ray task per motion, in one Ray session for the run, the same files."""
+    pytest.importorskip("ray", reason="Ray is the optional extra physmotion[ray]; make install has it")
+    import subprocess
+    import sys
+
+    def synth(out: Path, *how: str) -> None:
+        # in its own process, as a user runs it (a Ray driver's start and shutdown stay out of the test process)
+        command = [sys.executable, "-m", "physmotion.cli", "morph", "synth", "--data", str(built_dir), "-o", str(out),
+                   "--captions", "3", *how]  # fmt: skip
+        res = subprocess.run(command, capture_output=True, text=True, timeout=600)
+        assert res.returncode == 0, res.stderr
+        assert "3 new item(s), 3/3 done" in res.stdout
+
+    synth(tmp_path / "ray", "--ray", "local")
+    synth(tmp_path / "local", "--workers", "2")
+    assert index_rows(tmp_path / "ray") == index_rows(tmp_path / "local")
+    for row in index_rows(tmp_path / "ray"):
+        for sub in ("new_joints", "input_joints"):
+            a = np.load(tmp_path / "ray" / sub / f"{row['id']}.npy")
+            np.testing.assert_array_equal(a, np.load(tmp_path / "local" / sub / f"{row['id']}.npy"))
