@@ -216,8 +216,8 @@ class HumanoidConfig:
     # has the figures of both).
     cone: str = "pyramidal"
     impratio: float = 1.0
-    # MuJoCo's noslip solver: this many iterations after the main solver take the slip out of the friction
-    # dimensions (soft contacts otherwise let loaded feet creep). 0: off, MuJoCo's default.
+    # MuJoCo's noslip solver iterations (the slip of soft contacts taken out); 0, off: it did not lower the
+    # search's Skate (docs/decisions/projection.md: "MuJoCo's noslip solver for the search's feet").
     noslip: int = 0
     contact_excludes: tuple[tuple[str, str], ...] = DEFAULT_EXCLUDES
     heel_length: float = 0.061  # m behind the ankle (default body; scales with it); PHC's ankle box
