@@ -342,6 +342,33 @@ def learn_quotes() -> list[str]:
     return out
 
 
+def morph_search_quotes() -> list[str]:
+    """A Morph round refined by the search (issue 61, item 8): the refined synthetic motions, the models on
+    the test split and their plain samples of jump prompts, tracker-refined then search-refined."""
+    t, s = (r for r in _load("synth_refinement.json")["rows"])
+    base = {r["physics"]: r for r in _load("morph_search.json")["rows"] if r["model"] == "old"}["none"]
+    ctrl = {(r["model"], r["physics"]): r for r in _load("morph_search_control.json")["rows"]}
+    tr, se = ctrl["old", "none"], ctrl["new", "none"]
+    fl = {r["name"]: r for r in _load("model_flight.json")["rows"]}
+
+    def three(key: str, digits: int) -> str:
+        return " / ".join(f"{r[key]['mean']:.{digits}f}" for r in (base, tr, se))
+
+    return [
+        f"refined kept {t['refined']} / {s['refined']}, IFR {t['ifr']:.3f} / {s['ifr']:.3f}",
+        f"Phys-Err {t['output']['phys_err']:.1f} / {s['output']['phys_err']:.1f} mm (inputs {t['input']['phys_err']:.1f})",
+        f"Skate {t['output']['skate']:.1f} / {s['output']['skate']:.1f} mm",
+        f"outside help {t['residual_force']:.3f} / {s['residual_force']:.3f} W",
+        f"base {base['phys_err']['mean']:.1f}, tracker-refined {tr['phys_err']['mean']:.1f}, search-refined "
+        f"{se['phys_err']['mean']:.1f} mm Phys-Err",
+        f"FID {three('FID', 3)}, R@3 {three('R@3', 3)}",
+        f"base {fl['base']['flying']}, tracker-refined {fl['tracker-refined']['flying']}, search-refined "
+        f"{fl['search-refined']['flying']}, shipped Morph {fl['shipped']['flying']}",
+        f"flight kept against the base {fl['tracker-refined']['flight_kept']:.2f} / "
+        f"{fl['search-refined']['flight_kept']:.2f} / {fl['shipped']['flight_kept']:.2f}",
+    ]
+
+
 QUOTES = {  # which doc quotes which result file
     ("docs results", "evaluate"): evaluate_quotes,
     ("docs results", "bench"): bench_quotes,
@@ -372,6 +399,7 @@ QUOTES = {  # which doc quotes which result file
     ("results", "biomodiffuse"): biomodiffuse_quotes,
     ("imitator card", "imitator captured"): imitator_card_quotes,
     ("results", "learn"): learn_quotes,
+    ("results", "morph search"): morph_search_quotes,
     ("limitations", "learn"): learn_quotes,
 }
 
@@ -385,7 +413,8 @@ def _section(text: str, source: str) -> str:
              "new prompts": "new_prompts_default", "new prompts base": "new_prompts_base",
              "new prompts fine": "new_prompts_fine",
              "biomodiffuse": "results/biomodiffuse", "refine": "results/refine", "imitator": "results/imitator_",
-             "imitator captured": "results/imitator_captured", "learn": "learn_from_search"}
+             "imitator captured": "results/imitator_captured", "learn": "learn_from_search",
+             "morph search": "morph_search.*"}
     marker = files[source]
     return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
 
