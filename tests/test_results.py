@@ -356,7 +356,8 @@ def morph_search_quotes() -> list[str]:
 
     return [
         f"refined kept {t['refined']} / {s['refined']}, IFR {t['ifr']:.3f} / {s['ifr']:.3f}",
-        f"Phys-Err {t['output']['phys_err']:.1f} / {s['output']['phys_err']:.1f} mm (inputs {t['input']['phys_err']:.1f})",
+        f"Phys-Err {t['output']['phys_err']:.1f} / {s['output']['phys_err']:.1f} mm "
+        f"(inputs {t['input']['phys_err']:.1f})",
         f"Skate {t['output']['skate']:.1f} / {s['output']['skate']:.1f} mm",
         f"outside help {t['residual_force']:.3f} / {s['residual_force']:.3f} W",
         f"base {base['phys_err']['mean']:.1f}, tracker-refined {tr['phys_err']['mean']:.1f}, search-refined "
