@@ -27,7 +27,7 @@ import io
 import json
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 from functools import partial
 from pathlib import Path
 
@@ -401,12 +401,9 @@ def _refine(joints: list[np.ndarray], cfg: SynthConfig, projection: ProjectionCo
     if cfg.ray is None:
         return map_in_workers(partial(refine_item, preprocess_config=cfg.preprocess, projection=projection),
                               joints, cfg.workers)  # fmt: skip
-    from physmotion.physics.cluster import map_on_ray
+    from physmotion.physics.cluster import map_on_ray, one_core
 
-    if projection.controller == "search" and not projection.search.threads:  # a task has one core
-        projection = replace(projection, search=replace(projection.search, threads=1))
-    fn = partial(refine_item, preprocess_config=cfg.preprocess, projection=projection)
-
+    fn = partial(refine_item, preprocess_config=cfg.preprocess, projection=one_core(projection))
     results: list[dict] = [{}] * len(joints)
     for i, res in map_on_ray(fn, joints, cfg.ray):
         results[i] = res

@@ -9,9 +9,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from typing import TypeVar
+from dataclasses import replace
+from typing import TYPE_CHECKING, TypeVar
 
 from physmotion.errors import PhysmotionError
+
+if TYPE_CHECKING:
+    from physmotion.physics.projection import ProjectionConfig
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -58,6 +62,13 @@ def map_on_ray(fn: Callable[[T], R], items: Sequence[T], address: str = "local")
             except ray.exceptions.RayTaskError as e:  # the task's own exception, as a local run raises it
                 raise e.as_instanceof_cause() from None
             yield index, value
+
+
+def one_core(config: ProjectionConfig) -> ProjectionConfig:
+    """P's ``config`` for a task of one CPU: the search's rollout threads (one per core by default) at one."""
+    if config.controller == "search" and not config.search.threads:
+        return replace(config, search=replace(config.search, threads=1), workers=1)
+    return config
 
 
 def _call(fn: Callable[[T], R], item: T) -> R:

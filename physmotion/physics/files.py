@@ -17,6 +17,7 @@ from functools import partial
 from pathlib import Path
 
 from physmotion.errors import PhysmotionError
+from physmotion.physics.cluster import map_on_ray, one_core
 from physmotion.physics.projection import ProjectionConfig, project
 from physmotion.render import preview_path
 
@@ -139,15 +140,10 @@ def project_files(
                 on_done(results[i])
         else:
             todo.append(i)
-    # Each motion is one task: the search's own rollout threads get one core each.
-    task_config = config
-    if config.controller == "search" and not config.search.threads:
-        task_config = replace(config, search=replace(config.search, threads=1), workers=1)
-    fn = partial(_task, config=replace(task_config, workers=1), teacher=teacher, preview=preview)
+    # Each motion is one task of one core.
+    fn = partial(_task, config=replace(one_core(config), workers=1), teacher=teacher, preview=preview)
     jobs = [(sources[i], outs[i]) for i in todo]
     if ray is not None:
-        from physmotion.physics.cluster import map_on_ray
-
         finished: Iterator[tuple[int, FileResult]] = map_on_ray(fn, jobs, ray)
     else:
         from physmotion.physics.workers import imap_in_workers
