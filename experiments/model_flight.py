@@ -42,7 +42,7 @@ def measure(models: list[str], seeds: list[int], seconds: float) -> list[dict]:
     from physmotion.physics.surface import HumanoidSurface
 
     texts = prompts()
-    samples: list[list[np.ndarray]] = []
+    first: list[np.ndarray] | None = None  # the first model's samples, which the others are held against
     rows = []
     for name in models:
         net = MotionDiffusion.load(name)
@@ -50,11 +50,11 @@ def measure(models: list[str], seeds: list[int], seconds: float) -> list[dict]:
         for seed in seeds:
             cfg = GenerateConfig(seconds=seconds, physics="none", seed=seed)
             joints += [m.joints for m in generate(texts, cfg, model=net).motions]
-        samples.append(joints)
+        first = joints if first is None else first
         heights = np.array([flight_height(j.astype(np.float64)) for j in joints])
         flying = heights >= MIN_FLIGHT
         phys = physical_metrics(np.stack(joints), body=HumanoidSurface([None] * len(joints)))
-        ratios = flight_ratios(joints, samples[0])
+        ratios = flight_ratios(joints, first)
         rows.append({"model": name, "samples": len(joints), "flying": int(flying.sum()),
                      "flight_median_m": float(np.median(heights[flying])) if flying.any() else None,
                      "flight_each_m": heights.tolist(),
