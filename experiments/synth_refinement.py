@@ -28,15 +28,10 @@ def _joints(folder: Path, sub: str, ids: list[str]) -> list[np.ndarray]:
 
 def _metrics(joints: list[np.ndarray]) -> dict[str, float]:
     """Penetrate, Float, Skate and Phys-Err (mm) over motions of different lengths."""
-    from physmotion.metrics import physical_metrics
+    from physmotion.metrics import ragged_physical_metrics
     from physmotion.physics.surface import HumanoidSurface
 
-    lengths = np.array([len(j) for j in joints])
-    padded = np.zeros((len(joints), lengths.max(), *joints[0].shape[1:]))
-    for k, j in enumerate(joints):
-        padded[k, : len(j)] = j
-        padded[k, len(j):] = j[-1]  # past the end: masked by lengths
-    phys = physical_metrics(padded, lengths=lengths, body=HumanoidSurface([None] * len(joints)))
+    phys = ragged_physical_metrics(joints, body=HumanoidSurface([None] * len(joints)))
     return {k: float(phys[k]) for k in ("penetrate", "float", "skate", "phys_err")}
 
 

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
@@ -50,7 +50,7 @@ from physmotion.eval.evaluator import Evaluator
 from physmotion.eval.physics_columns import imitation_columns, metric_surface, reset_columns, residual_columns
 from physmotion.features.humanml3d import recover_from_ric
 from physmotion.generate import GenerateConfig, generate
-from physmotion.metrics import physical_metrics
+from physmotion.metrics import ragged_physical_metrics
 from physmotion.metrics.generation import (
     confidence_interval,
     diversity,
@@ -198,7 +198,7 @@ def evaluate(
             done += len(items)
             emb = evaluator.encode_motions([joints_to_features(on_data_floor(j)) for j in joints])
             run = _scores(emb, text_emb, real_emb, r, cfg)
-            run.update(_physical(joints, metric_surface(cfg.surface, bodies)))
+            run.update(ragged_physical_metrics(joints, FPS, body=metric_surface(cfg.surface, bodies)))
             run["sec/motion"] = seconds / len(items)
             run.update(resets)
             if mode == "none":
@@ -259,8 +259,8 @@ def _real_physical(items: list[MotionItem], cfg: EvaluateConfig) -> dict[str, fl
     real = [recover_from_ric(it.features.astype(np.float64)) for it in items]
     if cfg.surface == "humanoid":  # the metrics' floor convention: grounded on the surface they measure
         real, bodies = (list(z) for z in zip(*(ground_on_surface(j) for j in real)))
-        return _physical(real, metric_surface(cfg.surface, bodies))
-    return _physical(real, metric_surface(cfg.surface))
+        return ragged_physical_metrics(real, FPS, body=metric_surface(cfg.surface, bodies))
+    return ragged_physical_metrics(real, FPS, body=metric_surface(cfg.surface))
 
 
 def _generate(model, captions, items, gen_cfg, batch, tick) -> tuple[list, list, float, dict[str, float]]:
@@ -296,14 +296,6 @@ def _scores(emb, text_emb, real_emb, r, cfg) -> dict[str, float]:
     return {"R@1": float(acc[0]), "R@2": float(acc[1]), "R@3": float(acc[2]), "FID": fid(real_emb, emb),
             "MM-Dist": mm_dist, "Diversity": diversity(emb, cfg.diversity_times, seed=cfg.seed + r)}  # fmt: skip
 
-
-def _physical(joints: Sequence[np.ndarray], body) -> dict[str, float]:
-    lengths = [len(j) for j in joints]
-    padded = np.zeros((len(joints), max(lengths), 22, 3))
-    for i, j in enumerate(joints):
-        padded[i, : len(j)] = j
-        padded[i, len(j) :] = j[-1]
-    return physical_metrics(padded, FPS, lengths=lengths, body=body)
 
 
 def _summarise(runs: list[dict[str, float]], per_text: np.ndarray | None) -> dict[str, tuple[float, float]]:

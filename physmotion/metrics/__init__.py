@@ -31,6 +31,7 @@ from physmotion.metrics.physical import (
     pfc,
     phys_err,
     physical_metrics,
+    ragged_physical_metrics,
     skate,
     skating_ratio,
     smoothness,
@@ -44,6 +45,6 @@ __all__ = [
     "embedding_stats", "fid", "float_", "float_ratio", "format_table", "frechet_distance",
     "imitation_failure_rate", "lowest_surface_height", "mpjpe", "multimodality", "multimodality_per_text",
     "penetrate",
-    "penetration_ratio", "per_motion_metrics", "pfc", "phys_err", "physical_metrics", "r_precision", "skate",
+    "penetration_ratio", "per_motion_metrics", "pfc", "phys_err", "physical_metrics", "r_precision", "ragged_physical_metrics", "skate",
     "skating_ratio", "smoothness", "speed", "velocity_consistency",
 ]  # fmt: skip

@@ -656,6 +656,18 @@ def physical_metrics(joints: np.ndarray, fps: float = FPS, *, lengths: Lengths =
     return {name: values[name] for name in METRICS if name in values}
 
 
+def ragged_physical_metrics(joints: Sequence[np.ndarray], fps: float = FPS, *,
+                            body: BodySurface | None = None) -> dict[str, float]:  # fmt: skip
+    """:func:`physical_metrics` of motions of different lengths, each (T_i, 22, 3): padded with its last
+    frame and masked by its length."""
+    lengths = [len(j) for j in joints]
+    padded = np.zeros((len(joints), max(lengths), *np.shape(joints[0])[1:]))
+    for i, j in enumerate(joints):
+        padded[i, : len(j)] = j
+        padded[i, len(j) :] = j[-1]
+    return physical_metrics(padded, fps, lengths=lengths, body=body)
+
+
 def format_table(results: Mapping[str, Mapping[str, float]], title: str | None = None) -> Table:
     """A rich table of metric results: one row per metric (with unit and paper), one column per result.
 
