@@ -34,7 +34,7 @@ from physmotion.io.importer import ClipInfo, import_clip, load_manifest
 from physmotion.metrics.actions import flight_height
 from physmotion.physics.presets import preset
 from physmotion.physics.projection import ProjectionConfig
-from physmotion.physics.search import EFFORTS, SearchCost, effort, no_hand
+from physmotion.physics.search import EFFORTS, SearchCost, effort, no_hand, search_humanoid
 
 FAST_PROMPTS = {  # kind -> prompt: generic wording of each kind of fast motion
     "run": "a person runs forward",
@@ -81,8 +81,9 @@ def generated_set(seconds: float, seeds: int, prompts: dict[str, str] = FAST_PRO
 
 def rows(efforts: list[str], cost: SearchCost | None, cone_row: bool = True) -> dict[str, ProjectionConfig]:
     """Row label -> P's config. The tracker with and without its hand, under MuJoCo's default pyramidal
-    friction cone and under the elliptic one at impratio 10 (what the search runs on); the search at the
-    default effort under the pyramidal cone, and at every effort in ``efforts`` under the elliptic one."""
+    friction cone and under the elliptic one at impratio 10 (what the search runs on; the tracker's own
+    hand); the search on its own humanoid (:func:`search_humanoid`) at every effort in ``efforts``, and at
+    the default effort under the pyramidal cone."""
     plain = preset("plain")
     elliptic = replace(plain.humanoid, cone="elliptic", impratio=10.0)
     pyramidal = replace(plain.humanoid, cone="pyramidal", impratio=1.0)
@@ -90,9 +91,11 @@ def rows(efforts: list[str], cost: SearchCost | None, cone_row: bool = True) -> 
     for label, humanoid in (("pyramidal", pyramidal), ("elliptic", elliptic)):
         out[f"tracker, hand on, {label}"] = replace(plain, humanoid=humanoid)
         out[f"tracker, hand off, {label}"] = replace(plain, humanoid=humanoid, tracking=no_hand(plain.tracking))
-    searches = [(name, elliptic, "elliptic") for name in efforts]
-    if cone_row:
-        searches.insert(min(2, len(searches)), ("default", pyramidal, "pyramidal"))  # before the slowest
+    searched = search_humanoid(plain.humanoid)
+    searches = [(name, searched, "elliptic") for name in efforts]
+    if cone_row:  # before the slowest
+        pyramidal_search = replace(searched, cone="pyramidal", impratio=1.0)
+        searches.insert(min(2, len(searches)), ("default", pyramidal_search, "pyramidal"))
     for name, humanoid, label in searches:
         search = effort(name)
         search = replace(search, cost=cost) if cost is not None else search

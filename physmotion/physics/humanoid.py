@@ -219,9 +219,16 @@ class HumanoidConfig:
     # MuJoCo's noslip solver iterations (the slip of soft contacts taken out); 0, off: it did not lower the
     # search's Skate (docs/decisions/projection.md: "MuJoCo's noslip solver for the search's feet").
     noslip: int = 0
+    # Contact dimensionality (MuJoCo ``condim``): 3, sliding friction only; 4 adds torsional friction
+    # (``friction[1]``, m), 6 rolling too (``friction[2]``). 3: torsion did not lower the search's Skate
+    # (docs/decisions/projection.md: "the hand box and torsional friction").
+    condim: int = 3
     contact_excludes: tuple[tuple[str, str], ...] = DEFAULT_EXCLUDES
     heel_length: float = 0.061  # m behind the ankle (default body; scales with it); PHC's ankle box
     sole_below_toe: float = 0.0145  # m from the toe joint down to the sole (PHC's toe box)
+    # m from the wrist to the hand box's end (default body): PHC's straight hand to the fingertips; the
+    # search's humanoid ends it at the knuckles (physics/search.py ``search_humanoid``).
+    hand_length: float = 0.19
     joint_limits: bool = True
     # Body parts collide with the floor only. Mocap legs pass closer than these capsules and boxes
     # allow: in a Bandai side-step the reference itself had ankle-ankle contact in 42 of 134 frames
@@ -235,6 +242,10 @@ class HumanoidConfig:
         ratio = self.control_dt / self.sim_dt
         if abs(ratio - round(ratio)) > 1e-6:
             raise ShapeError(f"control_dt must be a multiple of sim_dt, got ratio {ratio:.4f}")
+        if self.condim not in (1, 3, 4, 6):
+            raise ShapeError(f"condim must be 1, 3, 4 or 6 (MuJoCo's contact dimensions), got {self.condim}")
+        if not self.hand_length > 0.02:
+            raise ShapeError(f"hand_length must reach past the wrist box's start (0.02 m), got {self.hand_length}")
         if self.residual_every < 1 or round(ratio) % self.residual_every:
             raise ShapeError(f"residual_every must divide the {round(ratio)} simulation steps per control "
                              f"step, got {self.residual_every}")
@@ -361,9 +372,10 @@ def _geoms(j: int, offsets: np.ndarray, cfg: HumanoidConfig, s: float) -> list[_
         half = np.array([0.0478 * s, 0.5 * (top - sole), 0.0496 * s])
         return [_Geom("box", centre, None, half)]
     if name.endswith("_wrist"):
-        # PHC's wrist capsule and hand box as one box along the forearm's direction (fromto box).
+        # PHC's wrist capsule and hand box as one box along the forearm's direction (fromto box), to
+        # ``hand_length``: the body has no wrist hinge, so the hand cannot bend to lie flat.
         d = offsets[j] / max(np.linalg.norm(offsets[j]), 1e-9)
-        return [_Geom("box", d * 0.02 * s, d * 0.19 * s, np.array([0.054 * s, 0.016 * s]))]
+        return [_Geom("box", d * 0.02 * s, d * cfg.hand_length * s, np.array([0.054 * s, 0.016 * s]))]
     if len(kids) >= 1:
         # Single bone (spine3 has three children: its capsule follows the neck, as in PHC).
         child = JOINT_INDEX["neck"] if name == "spine3" else kids[0]
@@ -452,8 +464,8 @@ def build_mjcf(offsets: np.ndarray | None = None, config: HumanoidConfig | None 
         "  <default>",
         f'    <joint type="hinge" armature="{cfg.armature:g}" damping="0"'
         f' limited="{str(cfg.joint_limits).lower()}"/>',
-        f'    <geom condim="3" friction="{_fmt(fr)}" solref="{_fmt(cfg.contact_solref)}" contype="1" '
-        f'conaffinity="{int(cfg.self_collision)}" rgba="0.8 0.6 0.4 1"/>',
+        f'    <geom condim="{cfg.condim}" friction="{_fmt(fr)}" solref="{_fmt(cfg.contact_solref)}" '
+        f'contype="1" conaffinity="{int(cfg.self_collision)}" rgba="0.8 0.6 0.4 1"/>',
         "  </default>",
         "  <worldbody>",
         f'    <geom name="floor" type="plane" size="0 0 0.05" friction="{_fmt(fr)}" '

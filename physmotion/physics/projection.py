@@ -30,7 +30,7 @@ from physmotion.features.biomech import FEATURE_DIM_BIOMECH, to_263
 from physmotion.features.humanml3d import FEATURE_DIM, recover_from_ric
 from physmotion.physics.humanoid import HumanoidConfig, body_from_joints, build_model, foot_lift
 from physmotion.physics.retarget import joints_to_qpos, qpos_to_joints
-from physmotion.physics.search import SearchConfig, SearchController
+from physmotion.physics.search import SearchConfig, SearchController, search_humanoid
 from physmotion.physics.shaping import ShapingConfig, shape_reference
 from physmotion.physics.surface import body_lowest, pose_frames
 from physmotion.physics.sim import Rollout, simulate
@@ -109,13 +109,12 @@ class ProjectionConfig:
     def with_controller(self, controller: str, policy: str | None = None,
                         search: SearchConfig | None = None) -> ProjectionConfig:  # fmt: skip
         """This P driven by ``controller`` ("tracker", "policy" loaded from ``policy``, or "search" at the
-        effort ``search``, the default one if None). The search's humanoid has the elliptic friction cone at
-        impratio 10 (better on its development clips, a wash on its whole table: docs/decisions/projection.md,
-        "a searching controller with no outside hand"); the tracker's keeps MuJoCo's default, as its figures
-        were measured."""
+        effort ``search``, the default one if None). The search runs on :func:`search_humanoid`'s body (the
+        elliptic friction cone, a hand that ends at the knuckles); the tracker's keeps MuJoCo's default cone
+        and PHC's hand, as its figures were measured."""
         humanoid = self.humanoid
         if controller == "search":
-            humanoid = replace(humanoid, cone="elliptic", impratio=10.0)
+            humanoid = search_humanoid(humanoid)
         return replace(self, controller=controller, policy=policy, search=search or self.search, humanoid=humanoid)
 
     def residual_bound(self) -> float:

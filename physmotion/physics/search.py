@@ -114,6 +114,14 @@ def effort(name: str, seed: int = 0) -> SearchConfig:
     return replace(EFFORTS[name], seed=seed)
 
 
+def search_humanoid(humanoid: HumanoidConfig) -> HumanoidConfig:
+    """The humanoid the search runs on: ``humanoid`` under the elliptic friction cone at impratio 10, with
+    the hand box ending at the knuckles (0.08 m past the wrist) instead of PHC's straight hand (0.19 m),
+    which the 22-joint body, with no wrist hinge, cannot bend to lay flat (docs/decisions/projection.md:
+    "a searching controller with no outside hand" and "the hand box and torsional friction")."""
+    return replace(humanoid, cone="elliptic", impratio=10.0, hand_length=0.08)
+
+
 def no_hand(tracking: TrackingConfig) -> TrackingConfig:
     """``tracking`` with every outside help switched off (residual force, torque and lift 0, no feet
     balance through ``qfrc_applied``): what the search's nominal control is built with."""

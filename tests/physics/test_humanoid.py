@@ -62,6 +62,23 @@ def test_options_follow_config(default_model) -> None:
     other = build_model(config=HumanoidConfig(cone="elliptic", impratio=10.0, noslip=5))
     assert other.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC and other.opt.impratio == 10.0
     assert other.opt.noslip_iterations == 5
+    assert set(m.geom_condim) == {3}
+    assert set(build_model(config=HumanoidConfig(condim=4)).geom_condim) == {4}
+    with pytest.raises(ShapeError, match="condim"):
+        HumanoidConfig(condim=2)
+    with pytest.raises(ShapeError, match="hand_length"):
+        HumanoidConfig(hand_length=0.01)
+
+
+def test_the_hand_box_ends_at_hand_length(default_model) -> None:
+    """The wrist's box runs from 2 cm past the wrist to ``hand_length`` along the forearm (default body)."""
+    short = build_model(config=HumanoidConfig(hand_length=0.08))
+    for m, length in ((default_model, 0.19), (short, 0.08)):
+        for side in ("left", "right"):
+            gid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"{side}_wrist")
+            assert m.geom_size[gid, 2] == pytest.approx(0.5 * (length - 0.02), rel=1e-6)
+            assert np.linalg.norm(m.geom_pos[gid]) == pytest.approx(0.5 * (length + 0.02), rel=1e-6)
+    assert short.body_mass.sum() == pytest.approx(default_model.body_mass.sum())  # the hand keeps its mass
     assert HumanoidConfig().substeps == 12  # control at 30 Hz
     assert HumanoidConfig(sim_dt=1 / 240).substeps == 8
     with pytest.raises(ShapeError):

@@ -12,7 +12,7 @@ from physmotion.errors import ShapeError
 from physmotion.io.importer import import_clip, load_manifest
 from physmotion.physics.policy import NUM_ACTIONS, OBS_DIM
 from physmotion.physics.projection import ProjectionConfig, prepare_motion, project
-from physmotion.physics.search import EFFORTS, SearchConfig, SearchController, effort, no_hand
+from physmotion.physics.search import EFFORTS, SearchConfig, SearchController, effort, no_hand, search_humanoid
 from physmotion.physics.sim import simulate
 from physmotion.physics.tracking import ModelBasedTracker, prepare_reference
 
@@ -31,6 +31,15 @@ def searched(captured_run: np.ndarray):
     """The run projected by the search at the default effort, and its config."""
     config = ProjectionConfig().with_controller("search", search=effort("default", seed=3))
     return project(captured_run, 20.0, config), config
+
+
+def test_the_search_runs_on_its_own_humanoid() -> None:
+    # The elliptic cone and a hand to the knuckles for the search; the tracker keeps the preset's body.
+    plain = ProjectionConfig()
+    searching = plain.with_controller("search").humanoid
+    assert searching == search_humanoid(plain.humanoid) != plain.humanoid
+    assert (searching.cone, searching.impratio, searching.hand_length) == ("elliptic", 10.0, 0.08)
+    assert plain.with_controller("tracker").humanoid == plain.humanoid
 
 
 def test_the_tracker_alone_falls_without_its_hand(captured_run: np.ndarray) -> None:
