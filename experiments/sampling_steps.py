@@ -1,10 +1,11 @@
 """Few-step sampling against DDIM 50 (issue 51, item 2): quality on the test split and warm timings, one table.
 
     python -m experiments.sampling_steps --data data_build/mocap [--tables runs/sampling_steps] [--runs 5]
-        [--out results/sampling_steps] [--skip-timing]
+        [--out results/sampling_steps] [--skip-timing] [--model MODEL] [--evaluator EVALUATOR]
 
 Quality: one ``physmotion evaluate`` run per sampler setting of :data:`RUNS` (test split, 3 repeats, the
-shipped model and evaluator, CFG 2.5, eta 0, seed 0): plain sampling and, for DDIM 50 and the candidate,
+shipped model and evaluator or those given, CFG 2.5, eta 0, seed 0): plain sampling and, for DDIM 50 and
+the candidate,
 PhysDiff with schedules adapted to the step count. Each run's table is ``<tables>/<name>.{md,json}``; a
 table already there (made by the ``physmotion evaluate`` command that :func:`evaluate_command` spells: the
 same computation) is read, after checking its meta, instead of re-run. Each row's FID and R@3 are held
@@ -71,9 +72,12 @@ RUNS = (
 )
 
 
-def evaluate_command(run: EvalRun, data: str, tables: Path) -> str:
-    """The ``physmotion evaluate`` command that writes ``run``'s table."""
-    return (f"physmotion evaluate --data {data} --sampler {run.sampler} --steps {run.steps} "
+def evaluate_command(run: EvalRun, data: str, tables: Path, model: str | None = None,
+                     evaluator: str | None = None) -> str:  # fmt: skip
+    """The ``physmotion evaluate`` command that writes ``run``'s table (the shipped model and evaluator
+    where None)."""
+    given = (f" --model {model}" if model else "") + (f" --evaluator {evaluator}" if evaluator else "")
+    return (f"physmotion evaluate --data {data}{given} --sampler {run.sampler} --steps {run.steps} "
             f"--physics {','.join(run.modes)} --repeats {REPEATS} -o {tables / run.name}")  # fmt: skip
 
 
@@ -89,8 +93,10 @@ def _check_meta(meta: dict, run: EvalRun, path: Path) -> None:
         raise PhysmotionError(f"{path}: not the run {run.name} ({got} vs {want}; modes missing: {missing})")
 
 
-def eval_tables(runs: Sequence[EvalRun], data: str, tables: Path) -> dict[str, dict]:
-    """Each run's evaluate table as ``EvalTable.to_json`` writes it, read from ``tables`` or computed there."""
+def eval_tables(runs: Sequence[EvalRun], data: str, tables: Path, model: str | None = None,
+                evaluator: str | None = None) -> dict[str, dict]:  # fmt: skip
+    """Each run's evaluate table as ``EvalTable.to_json`` writes it, read from ``tables`` or computed there
+    with ``model`` and ``evaluator`` (folders; the shipped ones where None)."""
     out: dict[str, dict] = {}
     for run in runs:
         path = tables / f"{run.name}.json"
@@ -101,10 +107,12 @@ def eval_tables(runs: Sequence[EvalRun], data: str, tables: Path) -> dict[str, d
             from physmotion.eval.table import EvaluateConfig, evaluate
             from physmotion.generate import GenerateConfig
 
-            print(f"evaluating {run.name}: {evaluate_command(run, data, tables)}", flush=True)
+            command = evaluate_command(run, data, tables, model, evaluator)
+            print(f"evaluating {run.name}: {command}", flush=True)
             base = GenerateConfig(sampler=SamplerConfig(sampler=run.sampler, steps=run.steps))
             cfg = EvaluateConfig(modes=run.modes, repeats=REPEATS, base=base)
-            evaluate(MotionDiffusion.load(), Evaluator.load(), data, cfg).write(tables / run.name)
+            table = evaluate(MotionDiffusion.load(model), Evaluator.load(evaluator), data, cfg)
+            table.write(tables / run.name)
         table = json.loads(path.read_text())
         _check_meta(table["meta"], run, path)
         out[run.name] = table
@@ -194,8 +202,9 @@ def markdown(rows: list[dict], meta: dict) -> str:
               f"{t['torch_threads']} torch threads, load average {t['load_before']} before and "
               f"{t['load_after']} after." if t else "Warm timings not run (--skip-timing).")  # fmt: skip
     return (heading("Few-step sampling against DDIM 50 (issue 51, item 2)", meta) +
-            f"Test split ({meta['motions']} motions), {REPEATS} repeats, mean ± 95 % interval, the shipped model "
-            f"and evaluator, CFG 2.5, eta 0, seed 0; Phys-Err on the humanoid surface. Plain rows are held "
+            f"Test split ({meta['motions']} motions), {REPEATS} repeats, mean ± 95 % interval, model "
+            f"{meta.get('model', 'shipped')}, evaluator {meta.get('evaluator', 'shipped')}, CFG 2.5, eta 0, "
+            f"seed 0; Phys-Err on the humanoid surface. Plain rows are held "
             f"against DDIM 50's `none` intervals, PhysDiff rows against DDIM 50's `{PHYSDIFF_BASE}` (within or "
             f"better). sec/motion: evaluate's wall time per motion (batches of 16, 2 cores shared with other "
             f"jobs). {timing}\n\n" + markdown_table(header, body) + "\n")  # fmt: skip
@@ -217,14 +226,17 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--skip-timing", action="store_true", help="the quality table only")
     parser.add_argument("--out", default="results/sampling_steps", help="output stem")
+    parser.add_argument("--model", default=None, help="model folder (default: the shipped one)")
+    parser.add_argument("--evaluator", default=None, help="evaluator folder (default: the shipped one)")
     args = parse_args(parser, argv)
 
     def run() -> tuple[str, list[Path]]:
         tdir = Path(args.tables)
-        tables = eval_tables(RUNS, args.data, tdir)
+        tables = eval_tables(RUNS, args.data, tdir, args.model, args.evaluator)
+        commands = {r.name: evaluate_command(r, args.data, tdir, args.model, args.evaluator) for r in RUNS}
         meta = run_meta(__file__, argv, args.tree, "sampling", motions=tables[BASELINE]["meta"]["motions"],
-                        data=args.data,
-                        evaluate_commands={r.name: evaluate_command(r, args.data, tdir) for r in RUNS})  # fmt: skip
+                        data=args.data, model=args.model or "shipped", evaluator=args.evaluator or "shipped",
+                        evaluate_commands=commands)  # fmt: skip
         times: dict[Setting, list[float]] = {}
         if not args.skip_timing:
             import torch
@@ -232,7 +244,10 @@ def main(argv: list[str] | None = None) -> int:
             if args.threads:
                 torch.set_num_threads(args.threads)
             before = os.getloadavg()
-            times = warm_timings([(r.sampler, r.steps, m) for r in RUNS for m in r.modes], args.runs)
+            from physmotion.diffusion.model import MotionDiffusion
+
+            times = warm_timings([(r.sampler, r.steps, m) for r in RUNS for m in r.modes], args.runs,
+                                 MotionDiffusion.load(args.model))  # fmt: skip
             meta["timing"] = {"rounds": args.runs, "prompt": PROMPT, "seconds": SECONDS,
                               "torch_threads": torch.get_num_threads(),
                               "load_before": " ".join(f"{x:.2f}" for x in before),

@@ -50,6 +50,25 @@ def test_main_writes_the_table_and_meta(tmp_path: Path) -> None:
     assert f"| ddim | 50 | {PHYSDIFF_BASE} |" in out.with_name("study.md").read_text()
 
 
+def test_the_model_and_evaluator_given_are_named(tmp_path: Path) -> None:
+    from experiments.sampling_steps import evaluate_command
+
+    run = RUNS[0]
+    assert "--model" not in evaluate_command(run, "data_build/mocap", tmp_path)
+    given = evaluate_command(run, "data_build/mocap", tmp_path, "runs/old", "runs/old_evaluator")
+    assert given.startswith("physmotion evaluate --data data_build/mocap --model runs/old "
+                            "--evaluator runs/old_evaluator ")
+    _tables(tmp_path, {r.name: 0.13 for r in RUNS})
+    out = tmp_path / "study"
+    argv = ["--allow-dirty", "--tables", str(tmp_path), "--skip-timing", "--out", str(out),
+            "--model", "runs/old", "--evaluator", "runs/old_evaluator"]  # fmt: skip
+    assert main(argv) == 0
+    meta = json.loads(out.with_name("study.json").read_text())["meta"]
+    assert (meta["model"], meta["evaluator"]) == ("runs/old", "runs/old_evaluator")
+    assert "--model runs/old" in meta["evaluate_commands"][BASELINE]
+    assert "model runs/old, evaluator runs/old_evaluator" in out.with_name("study.md").read_text()
+
+
 def test_a_table_of_another_run_is_refused(tmp_path: Path) -> None:
     from experiments.sampling_steps import eval_tables
 
