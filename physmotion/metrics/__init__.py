@@ -44,7 +44,7 @@ __all__ = [
     "MetricParams", "acceleration_consistency", "clip_ratio", "confidence_interval", "diversity",
     "embedding_stats", "fid", "float_", "float_ratio", "format_table", "frechet_distance",
     "imitation_failure_rate", "lowest_surface_height", "mpjpe", "multimodality", "multimodality_per_text",
-    "penetrate",
-    "penetration_ratio", "per_motion_metrics", "pfc", "phys_err", "physical_metrics", "r_precision", "ragged_physical_metrics", "skate",
+    "penetrate", "penetration_ratio", "per_motion_metrics", "pfc", "phys_err", "physical_metrics",
+    "r_precision", "ragged_physical_metrics", "skate",
     "skating_ratio", "smoothness", "speed", "velocity_consistency",
 ]  # fmt: skip

@@ -245,7 +245,8 @@ class HumanoidConfig:
         if self.condim not in (1, 3, 4, 6):
             raise ShapeError(f"condim must be 1, 3, 4 or 6 (MuJoCo's contact dimensions), got {self.condim}")
         if not self.hand_length > 0.02:
-            raise ShapeError(f"hand_length must reach past the wrist box's start (0.02 m), got {self.hand_length}")
+            raise ShapeError(f"hand_length must reach past the wrist box's start (0.02 m), "
+                             f"got {self.hand_length}")
         if self.residual_every < 1 or round(ratio) % self.residual_every:
             raise ShapeError(f"residual_every must divide the {round(ratio)} simulation steps per control "
                              f"step, got {self.residual_every}")
