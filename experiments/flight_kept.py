@@ -2,20 +2,26 @@
 then P under the sampling preset and variants of it, each against its own plain sample.
 
 Usage: python -m experiments.flight_kept [--seeds 0,1,2] [--seconds 4] [--variants sampling,ballistic,...]
-       [--mode physdiff:end:2,space:1 --mode ...] [--out results/flight_kept]
+       [--mode physdiff:end:2,space:1 --mode ...] [--fallback] [--out results/flight_kept]
 
 Rows: each ``--mode`` (default: generate's default, PhysDiff with P at the last 2 steps) is ``generate``
 with that physics mode against the plain sample of the same prompt and seed; every other row is one P (as ``post:1``) of the plain samples under a variant of
 :meth:`ProjectionConfig.sampling` (:data:`VARIANTS`). Columns: flight kept (median of output over
 sample flight where the sample flies, :mod:`physmotion.metrics.dynamics`), the share of outputs with a
 reset, jumps past the sample's largest frame step + 2 cm, the root help (force and torque p95, share
-held at a cap), and Phys-Err. The prompts are the jump and hop categories of the unseen-prompt benchmark
+held at a cap), Phys-Err, the share of outputs the search made (``ProjectionConfig.fallback``), and the
+cost: CPU seconds (this process and its finished worker processes) per second of output motion, and
+wall seconds per output; a mode's cost includes sampling. The prompts are the jump and hop categories of the unseen-prompt benchmark
 (``experiments/prompts.py`` ``NEW_PROMPTS``) and :data:`FRESH`, written for this study.
 """
 
 from __future__ import annotations
 
 import argparse
+import multiprocessing
+import os
+import resource
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -30,7 +36,6 @@ FRESH: tuple[str, ...] = ("a person jumps up and lands softly", "someone jumps o
 def _variant(name: str):
     """The P of a row: the sampling preset with one change."""
     from physmotion.physics.projection import ProjectionConfig
-    from physmotion.physics.shaping import ShapingConfig
 
     base = ProjectionConfig.sampling()
     if name == "sampling":
@@ -43,14 +48,32 @@ def _variant(name: str):
         return replace(base, let_land=False, shaping=replace(base.shaping, ballistic_flight=True))
     if name == "lift_0.3":  # the lift cap up to the force cap
         return replace(base, tracking=replace(base.tracking, residual_lift=0.3))
+    if name == "fallback":  # the search where the tracker resets, fails or keeps under 0.8 of the flight
+        return replace(base, fallback=True)
     raise ValueError(f"unknown variant {name!r}")
 
 
-VARIANTS = ("sampling", "ballistic", "no_land", "ballistic_no_land", "lift_0.3")
+VARIANTS = ("sampling", "ballistic", "no_land", "ballistic_no_land", "lift_0.3", "fallback")
 
 
-def measure(seeds: list[int], seconds: float, variants: list[str], modes: list[str]) -> dict[str, dict]:
-    """Row name -> figures (see the module docstring)."""
+def _cpu_wall() -> np.ndarray:
+    """(CPU seconds of this process and its children, wall seconds) now. P's worker pool lives on between
+    calls, so its live processes' CPU is read from /proc (Linux) as well as that of the finished ones."""
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+    for child in multiprocessing.active_children():
+        try:
+            fields = Path(f"/proc/{child.pid}/stat").read_text().rsplit(")", 1)[1].split()
+            cpu += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime
+        except (OSError, IndexError, ValueError):  # gone meanwhile, or no /proc
+            pass
+    return np.array([cpu, time.perf_counter()])
+
+
+def measure(seeds: list[int], seconds: float, variants: list[str], modes: list[str],
+            fallback: bool = False) -> dict[str, dict]:  # fmt: skip
+    """Row name -> figures (see the module docstring); with ``fallback``, each mode again with the search
+    as the tracker's fallback (row "<mode> +fallback")."""
     from experiments.prompts import NEW_PROMPTS
     from physmotion.diffusion.model import MotionDiffusion
     from physmotion.diffusion.physdiff import on_data_floor
@@ -64,16 +87,22 @@ def measure(seeds: list[int], seconds: float, variants: list[str], modes: list[s
 
     prompts = [*NEW_PROMPTS["jump"], *NEW_PROMPTS["hop"], *FRESH]
     model = MotionDiffusion.load()
-    plain, outputs = [], {}
+    plain, outputs, spent = [], {}, {}
     for seed in seeds:
         cfg = GenerateConfig(seconds=seconds, physics="none", seed=seed)
         plain += [m.joints for m in generate(prompts, cfg, model=model).motions]
         for mode in modes:
-            res = generate(prompts, replace(cfg, physics=mode), model=model)
-            outputs.setdefault(mode, []).extend(res.motions)
+            runs = {mode: cfg.projection, f"{mode} +fallback": replace(cfg.projection, fallback=True)}
+            for name, projection in list(runs.items())[: 2 if fallback else 1]:
+                start = _cpu_wall()
+                res = generate(prompts, replace(cfg, physics=mode, projection=projection), model=model)
+                outputs.setdefault(name, []).extend(res.motions)
+                spent[name] = spent.get(name, np.zeros(2)) + _cpu_wall() - start
     for name in variants:
         config = _variant(name)
+        start = _cpu_wall()
         res = project(np.stack([on_data_floor(j) for j in plain]), config=config)
+        spent[name] = _cpu_wall() - start
         outputs[name] = [Motion(joints=res.joints[i], humanoid=res.body[i], **res.record(i).motion_fields(
             config.residual_bound())) for i in range(len(plain))]  # fmt: skip
     rows = {}
@@ -85,7 +114,9 @@ def measure(seeds: list[int], seconds: float, variants: list[str], modes: list[s
                       "flight_kept_each": ratios, "motions": len(motions),
                       "with_reset": float(np.mean([(m.resets or 0) > 0 for m in motions])),
                       "step_jumps": step_jumps(joints, plain), "phys_err": float(phys["phys_err"]),
-                      **help_stats(motions)}  # fmt: skip
+                      "searched": float(np.mean([bool(m.searched) for m in motions])),
+                      "cpu_s_per_s": float(spent[name][0] / sum(m.seconds for m in motions)),
+                      "wall_s_per_output": float(spent[name][1] / len(motions)), **help_stats(motions)}  # fmt: skip
     return rows
 
 
@@ -96,6 +127,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--variants", default=",".join(VARIANTS))
     parser.add_argument("--mode", action="append", default=None,
                         help="a generate physics mode to measure (repeatable; default: generate's default)")
+    parser.add_argument("--fallback", action="store_true",
+                        help="each --mode again with the search as the tracker's fallback")
     parser.add_argument("--out", default=str(ROOT / "results" / "flight_kept"))
     args = parse_args(parser, argv)
 
@@ -107,14 +140,16 @@ def main(argv: list[str] | None = None) -> int:
         from physmotion.generate import GenerateConfig
 
         modes = args.mode if args.mode is not None else [str(GenerateConfig().physics)]
-        rows = measure(seeds, args.seconds, variants, [m for m in modes if m])
+        rows = measure(seeds, args.seconds, variants, [m for m in modes if m], args.fallback)
         meta = run_meta(__file__, argv, args.tree, {name: "sampling" for name in rows}, seeds=seeds, seconds=args.seconds)
         header = ["row", "flight kept (median)", "flying samples", "outputs with a reset", "jumps past the sample's",
-                  "root force p95, W", "root torque p95, W m", "held at a cap", "Phys-Err, mm"]
+                  "root force p95, W", "root torque p95, W m", "held at a cap", "Phys-Err, mm", "searched",
+                  "CPU s / s of motion", "wall s / output"]
         body = [[name, "-" if r["flight_kept"] is None else f"{r['flight_kept']:.2f}", r["flying"],
                  f"{100 * r['with_reset']:.0f} %", f"{100 * r['step_jumps']:.0f} %",
                  f"{r['residual_force_p95']:.2f}", f"{r['residual_torque_p95']:.2f}",
-                 f"{100 * r['residual_at_cap']:.0f} %", f"{r['phys_err']:.1f}"] for name, r in rows.items()]  # fmt: skip
+                 f"{100 * r['residual_at_cap']:.0f} %", f"{r['phys_err']:.1f}", f"{100 * r['searched']:.0f} %",
+                 f"{r['cpu_s_per_s']:.2f}", f"{r['wall_s_per_output']:.1f}"] for name, r in rows.items()]  # fmt: skip
         table = heading("Flight kept by generation's P on jump and hop prompts", meta) + markdown_table(header, body)
         return table, write_results(args.out, table, {"meta": meta, "rows": rows})
 

@@ -263,6 +263,10 @@ def physics_summary(result: GenerateResult) -> str:
         return ""
     pooled = pooled_help(result.motions)
     helped = f"; {help_words(*pooled)}" if pooled else ""
+    searched = sum(bool(m.searched) for m in result.motions)
+    if searched:  # the search's fallback (ProjectionConfig.fallback): those motions had no outside hand
+        helped += (f"; the search (no outside hand) made {searched} of {len(result.motions)} motions where the "
+                   "tracker fell or flattened a flight (per motion in generate.json: 'searched')")
     if result.imitation_failed:  # morph: a failed imitation keeps the sampled motion, nothing is reset
         n, failed = len(result.imitation_failed), int(sum(result.imitation_failed))
         return (f"the simulated humanoid imitated {n - failed} of {n} motions; "
@@ -324,7 +328,8 @@ def write_outputs(
         written += files
         motions.append({"prompt": motion.texts[0], "sample": int(stem.rsplit("_", 1)[1]),
                         "files": [p.name for p in files], "resets": result.resets[i] if result.projections.calls else None,
-                        "reset_frames": _frame_list(motion.reset_frames)})  # fmt: skip
+                        "reset_frames": _frame_list(motion.reset_frames),
+                        "searched": motion.searched})  # fmt: skip
         if result.lengths:  # the length asked for, and whether the user gave it or the text's was predicted
             motions[-1]["seconds"] = round(result.lengths[i] / FPS, 2)
             motions[-1]["length_source"] = result.length_source[i]

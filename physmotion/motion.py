@@ -41,6 +41,8 @@ class Motion:
     (force, lift or torque); reset_frames: (T,) bool, frames that are not simulated: where the humanoid
     was put back on the motion and the cross-fade before it (``ProjectedMotion.reset_frames``, over every
     P call that made the motion). Each None where P was not applied (or the file predates it).
+    searched: for P's output, whether the search (no outside hand) made it in place of the tracker
+    (``ProjectedMotion.searched``, in any P call); None where P was not applied.
     """
 
     joints: np.ndarray
@@ -58,6 +60,7 @@ class Motion:
     residual_peak: np.ndarray | None = None
     residual_at_cap: np.ndarray | None = None
     reset_frames: np.ndarray | None = None
+    searched: bool | None = None
 
     def __post_init__(self) -> None:
         if np.asarray(self.joints).dtype.kind not in "fiu":
@@ -118,7 +121,7 @@ class Motion:
 
     def save(self, path: str | Path) -> None:
         """Write an .npz (joints, rotations, offsets, humanoid, resets, residual, residual_cap, over_limit,
-        residual_peak, residual_at_cap, reset_frames, fps, text, licence_tag) atomically."""
+        residual_peak, residual_at_cap, reset_frames, searched, fps, text, licence_tag) atomically."""
         arrays: dict[str, np.ndarray] = {
             "joints": self.joints,
             "fps": np.float32(self.fps),
@@ -145,6 +148,8 @@ class Motion:
         for name in ("residual_at_cap", "reset_frames"):
             if getattr(self, name) is not None:
                 arrays[name] = np.asarray(getattr(self, name), dtype=bool)
+        if self.searched is not None:
+            arrays["searched"] = np.bool_(self.searched)
         write_atomic(path, lambda f: np.savez(f, **arrays))
 
     @classmethod
@@ -177,6 +182,7 @@ class Motion:
                     residual=data["residual"] if "residual" in data else None,
                     residual_cap=float(data["residual_cap"]) if "residual_cap" in data else None,
                     over_limit=data["over_limit"] if "over_limit" in data else None,
+                    searched=bool(data["searched"]) if "searched" in data else None,
                     **{name: data[name] for name in ("residual_peak", "residual_at_cap", "reset_frames")
                        if name in data},
                 )

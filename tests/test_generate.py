@@ -86,6 +86,28 @@ def test_resets_and_their_frames_are_one_count_everywhere(tiny_model, tmp_path: 
     assert f"{run['projections']['resets_total']} time(s) in all" in physics_summary(result)
 
 
+@pytest.mark.slow
+def test_the_search_fallback_is_recorded_where_it_took_over(tiny_model, tmp_path: Path) -> None:
+    """One P with the search as the tracker's fallback on the tiny model's run (which the tracker resets):
+    the motions the search made say so in the .npz, in generate.json and in the summary, and
+    carry no outside help."""
+    from physmotion.generate import physics_summary
+    from physmotion.physics.projection import ProjectionConfig
+    from physmotion.physics.search import effort
+
+    projection = ProjectionConfig.sampling(fallback=True, search=effort("fast"))
+    cfg = _cfg(physics="post:1", projection=projection)
+    result = generate(["a person runs fast and jumps"], cfg, tiny_model)
+    write_outputs(result, tmp_path / "out", cfg, preview=False)
+    (run,) = json.loads((tmp_path / "out" / "generate.json").read_text())["runs"]
+    (entry,), (motion,) = run["motions"], result.motions
+    back = Motion.load(tmp_path / "out" / entry["files"][0])
+    print(f"\nsearched {motion.searched}, resets {motion.resets}; {physics_summary(result)}")
+    assert motion.searched is True and entry["searched"] is True and back.searched is True
+    assert "the search (no outside hand) made 1 of 1 motions" in physics_summary(result)
+    assert not motion.residual.any() and not motion.residual_at_cap.any()
+
+
 @pytest.mark.parametrize(
     ("texts", "config", "message"),
     [

@@ -103,13 +103,16 @@ def test_a_joined_licence_tag_keeps_every_restriction() -> None:
 
 
 def test_the_help_in_full_and_the_reset_frames_travel_with_the_motion(tmp_path: Path) -> None:
-    """P's per-frame peaks, frames held at a cap and frames not simulated are saved and read back; a wrong
-    shape or dtype is refused, naming the field."""
+    """P's per-frame peaks, frames held at a cap, frames not simulated and whether the search made it are
+    saved and read back; a wrong shape or dtype is refused, naming the field."""
     peak = np.stack([np.linspace(0, 0.4, 10), np.linspace(0, 0.9, 10)], axis=-1)
     at_cap, reset = np.arange(10) % 3 == 0, np.arange(10) >= 7
     Motion(_standing(), residual=peak / 2, residual_peak=peak, residual_at_cap=at_cap, reset_frames=reset,
            resets=1).save(tmp_path / "p.npz")  # fmt: skip
     back = Motion.load(tmp_path / "p.npz")
+    assert back.searched is None  # P's tracker or no P: nothing said
+    Motion(_standing(), residual=np.zeros((10, 2)), resets=0, searched=True).save(tmp_path / "s.npz")
+    assert Motion.load(tmp_path / "s.npz").searched is True
     np.testing.assert_array_equal(back.residual_peak, peak.astype(np.float32))
     np.testing.assert_array_equal(back.residual_at_cap, at_cap)
     np.testing.assert_array_equal(back.reset_frames, reset)

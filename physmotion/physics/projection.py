@@ -90,6 +90,14 @@ class ProjectionConfig:
     # simulation onto the motion it is put back on, so no frame jumps (docs/decisions/projection.md: "resets
     # as frames, cross-faded"). Those frames are not simulated: ``ProjectedMotion.reset_frames`` marks them.
     crossfade: float = 0.25
+    # The search as the tracker's fallback: a motion the tracker (or the policy) had to reset, failed, or
+    # whose flight it kept less than ``fallback_flight`` of (flight as ``metrics.actions.flight_height``)
+    # is projected again by the search at the effort of ``search``, with no outside hand, and the search's
+    # output is kept unless it was reset more often. Motions the tracker follows cost what they did; the
+    # ones it flattens or teleports cost the search's seconds per second of motion
+    # (docs/decisions/projection.md: "the search as the tracker's fallback").
+    fallback: bool = False
+    fallback_flight: float = 0.8
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.crossfade <= 2.0:
@@ -105,6 +113,10 @@ class ProjectionConfig:
                              "(the plain preset)")
         if self.ilc_passes and self.controller == "search":  # the search corrects the body itself, per window
             raise ShapeError("ilc_passes is for the tracker and the policy, not the search controller")
+        if self.fallback and self.controller == "search":
+            raise ShapeError("the search fallback is for the tracker and the policy; the search has none")
+        if not 0.0 <= self.fallback_flight <= 1.0:
+            raise ShapeError(f"fallback_flight must be in 0..1, got {self.fallback_flight}")
 
     def with_controller(self, controller: str, policy: str | None = None,
                         search: SearchConfig | None = None) -> ProjectionConfig:  # fmt: skip
@@ -201,6 +213,8 @@ class ProjectedMotion:
     over_limit: (B, T) bool, frames in which a hinge's total torque (actuator plus the joint torques the
     tracker's feet-balance path applies directly) passed the actuator's force limit: the actuators alone
     are bounded, that path is not (:func:`~physmotion.physics.sim.control_step`).
+    searched: (B,) bool, the search took over from the tracker (``ProjectionConfig.fallback``): no outside
+    hand on that motion.
     teacher_obs, teacher_offsets: with the search controller only, per control step of the simulation
     (B, N, 599) float32 the observation a policy would see (:func:`physmotion.physics.policy.observe`, cap
     0) and (B, N, 63) the joint-target offsets the search committed (rad): a policy's teacher labels.
@@ -223,6 +237,7 @@ class ProjectedMotion:
     residual_torque_peak: np.ndarray
     at_cap: np.ndarray
     reset_frames: np.ndarray
+    searched: np.ndarray
     teacher_obs: np.ndarray | None = None
     teacher_offsets: np.ndarray | None = None
 
@@ -241,7 +256,7 @@ class ProjectedMotion:
         at = (lambda a: a) if k is None else (lambda a: a[k])
         return SimRecord(int(at(self.resets)), at(self.residual), at(self.residual_peak),
                          at(self.at_cap).astype(bool), at(self.over_limit).astype(bool),
-                         at(self.reset_frames).astype(bool))  # fmt: skip
+                         at(self.reset_frames).astype(bool), bool(at(self.searched)))  # fmt: skip
 
 
 @dataclass
@@ -251,7 +266,8 @@ class SimRecord:
     resets: times the humanoid was put back on the motion; residual, residual_peak: (T, 2) float32 root
     residual per frame, mean and peak (force x W, torque x W x 1 m); at_cap: (T,) bool, a residual update
     held at a cap; over_limit: (T,) bool, a joint's torque past its actuator's limit; reset_frames: (T,)
-    bool, frames not simulated (a reset and the cross-fade before it)."""
+    bool, frames not simulated (a reset and the cross-fade before it); searched: the search made it, not
+    the tracker (``ProjectionConfig.fallback``)."""
 
     resets: int
     residual: np.ndarray
@@ -259,13 +275,15 @@ class SimRecord:
     at_cap: np.ndarray
     over_limit: np.ndarray
     reset_frames: np.ndarray
+    searched: bool = False
 
     def after(self, earlier: SimRecord | None) -> SimRecord:
         """This record of P's output following ``earlier`` P calls on the same motion (PhysDiff's calls in
-        sampling, post's passes): the resets of every call counted, their frames marked."""
+        sampling, post's passes): the resets of every call counted, their frames marked, a search in any
+        call noted."""
         if earlier is None:
             return self
-        return replace(self, resets=self.resets + earlier.resets,
+        return replace(self, resets=self.resets + earlier.resets, searched=self.searched or earlier.searched,
                        reset_frames=self.reset_frames | earlier.reset_frames)  # fmt: skip
 
     def motion_fields(self, cap: float) -> dict:
@@ -273,7 +291,7 @@ class SimRecord:
         cap is ``cap`` (x W)."""
         return dict(resets=int(self.resets), residual=self.residual, residual_cap=cap, over_limit=self.over_limit,
                     residual_peak=self.residual_peak, residual_at_cap=self.at_cap,
-                    reset_frames=self.reset_frames)  # fmt: skip
+                    reset_frames=self.reset_frames, searched=self.searched)  # fmt: skip
 
 
 def as_joints(motion: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -335,7 +353,7 @@ def project(
     joints, batched = as_joints(motion)
     if not fps > 0:
         raise ShapeError(f"fps must be positive, got {fps}")
-    if cfg.controller == "search" and not cfg.search.threads:  # the search's threads share the cores
+    if (cfg.controller == "search" or cfg.fallback) and not cfg.search.threads:  # the search's threads share the cores
         inside_worker = multiprocessing.current_process().daemon  # a caller's worker: its siblings use the rest
         per_worker = 1 if inside_worker else max(1, (os.cpu_count() or 1) // worker_count(cfg.workers, len(joints)))
         cfg = replace(cfg, search=replace(cfg.search, threads=per_worker))
@@ -400,7 +418,7 @@ def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig,
     prep = prepare_motion(x, fps, config)
     body, model, lift, target, grounded = prep.body, prep.model, prep.lift, prep.target, prep.grounded
     if config.controller == "search":
-        return _search_one(prep, x, fps, config, on_step)
+        return _search_one(prep, x, fps, config, on_step) | {"searched": np.array(True)}
     tracker = _controller(model, config)  # holds no episode state: one serves every pass
     reference, best = target, None
     for ilc_pass in range(config.ilc_passes + 1):
@@ -416,7 +434,39 @@ def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig,
         if ilc_pass < config.ilc_passes:  # the next pass's reference: the root error fed forward
             reference = reference.copy()
             reference[:, :3] += config.ilc_gain * (target[:, :3] - roll.qpos[:, :3])
-    return best[1] | {"body": body, "grounded": np.array(grounded)}
+    tracked = best[1] | {"body": body, "grounded": np.array(grounded), "searched": np.array(False)}
+    if config.fallback and _falls_short(tracked, x, config.fallback_flight):
+        return _fallback(tracked, x, fps, config, on_step)
+    return tracked
+
+
+def _falls_short(out: dict[str, np.ndarray], x: np.ndarray, flight: float) -> bool:
+    """Whether the tracker's output ``out`` of motion x (T, 22, 3) needs the search: it was reset, failed,
+    or kept less than ``flight`` of x's flight (where x flies at all, ``metrics.dynamics.MIN_FLIGHT``)."""
+    from physmotion.metrics.actions import flight_height
+    from physmotion.metrics.dynamics import MIN_FLIGHT
+
+    if int(out["resets"]) > 0 or not bool(out["success"]):
+        return True
+    wanted = flight_height(x)
+    return wanted >= MIN_FLIGHT and flight_height(out["joints"].astype(np.float64)) < flight * wanted
+
+
+def _fallback(tracked: dict[str, np.ndarray], x: np.ndarray, fps: float, config: ProjectionConfig,
+              on_step: Callable[[int, int], None] | None) -> dict[str, np.ndarray]:  # fmt: skip
+    """The search's projection of x in place of the tracker's output ``tracked``, on the search's body
+    (:func:`search_humanoid`), unless the search did worse (reset more often, or failed where the tracker
+    did not); a teacher's records are dropped, so a batch stacks alike."""
+    searching = replace(config, controller="search", fallback=False, ilc_passes=0,
+                        humanoid=search_humanoid(config.humanoid))  # fmt: skip
+    out = _search_one(prepare_motion(x, fps, searching), x, fps, searching, on_step)
+
+    def worse(o: dict) -> tuple[int, bool]:
+        return int(o["resets"]), not bool(o["success"])
+
+    if worse(out) > worse(tracked):
+        return tracked
+    return {k: v for k, v in out.items() if not k.startswith("teacher_")} | {"searched": np.array(True)}
 
 
 def _search_one(prep: PreparedMotion, x: np.ndarray, fps: float, config: ProjectionConfig,

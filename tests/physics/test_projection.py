@@ -277,6 +277,41 @@ def test_captured_jumps_keep_their_flight(mocap_dir) -> None:
     assert np.mean(short) <= 0.07 and max(short) <= 0.08
 
 
+def test_the_fallback_leaves_what_the_tracker_follows(walk: np.ndarray) -> None:
+    """A walk the tracker follows with no reset and no flight to keep: the fallback changes nothing."""
+    plain = project(walk, config=ProjectionConfig.sampling())
+    with_fallback = project(walk, config=ProjectionConfig.sampling(fallback=True))
+    assert plain.resets == 0 and not plain.searched and not with_fallback.searched
+    np.testing.assert_array_equal(with_fallback.joints, plain.joints)
+
+
+@pytest.mark.slow
+def test_the_search_takes_over_a_jump_the_tracker_flattens(mocap_dir) -> None:
+    """CMU 01_01's first forward jump (2.5 s): generation's tracker keeps 0.57 of its flight (both feet
+    off the floor, 18.9 cm -> 10.8 cm measured); as its fallback the search keeps 0.97 (18.3 cm) with no
+    outside hand and no reset."""
+    from physmotion.metrics.actions import flight_height
+
+    jump, fps = _clip(mocap_dir, "cmu_01_01")
+    jump = jump[: int(2.5 * fps)]
+    tracked = project(jump, fps=fps, config=ProjectionConfig.sampling())
+    searched = project(jump, fps=fps, config=ProjectionConfig.sampling(fallback=True))
+    flight = [flight_height(j.astype(np.float64)) for j in (jump, tracked.joints, searched.joints)]
+    print(f"\nflight {flight[0]:.3f} m: tracker {flight[1]:.3f}, fallback {flight[2]:.3f}; resets "
+          f"{tracked.resets} / {searched.resets}")
+    assert flight[1] < 0.8 * flight[0] and not tracked.searched  # what triggers the fallback
+    assert searched.searched and searched.success and searched.resets == 0
+    assert flight[2] >= 0.9 * flight[0]
+    assert not searched.residual.any() and not searched.at_cap.any() and not searched.over_limit.any()
+
+
+def test_the_fallback_is_for_the_tracker() -> None:
+    with pytest.raises(ShapeError, match="fallback"):
+        ProjectionConfig(controller="search", fallback=True)
+    with pytest.raises(ShapeError, match="fallback_flight"):
+        ProjectionConfig(fallback_flight=1.5)
+
+
 def test_a_non_grounded_motion_is_rejected_not_tracked_into_the_floor(mocap_dir) -> None:
     """A bow held 0.3 m up for 2 s (standing on something we do not simulate): the humanoid can only
     imitate it on the floor (MPJPE about 0.32 m, under Morph's 0.5 m), so selection must reject it for
