@@ -66,6 +66,14 @@ class GenerateConfig:
         return replace(self, projection=self.projection.at_fine_step(),
                        morph_projection=self.morph_projection.at_fine_step())  # fmt: skip
 
+    def with_search_fallback(self, on: bool) -> GenerateConfig:
+        """This run with the search as the tracker's fallback in PhysDiff's and post's P, or without it
+        (``ProjectionConfig.fallback``; ``generate --search-fallback/--no-search-fallback``)."""
+        if on and self.projection.controller == "search":
+            raise PhysmotionError("--search-fallback is for the tracker and the policy; --controller search "
+                                  "searches every motion already")
+        return replace(self, projection=replace(self.projection, fallback=on))
+
     def with_controller(self, controller: str, policy: str | None = None) -> GenerateConfig:
         """This run with every P driven by ``controller`` ("tracker", "policy" or "search"; ``generate --controller``)."""
         return replace(self, projection=self.projection.with_controller(controller, policy),

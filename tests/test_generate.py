@@ -86,6 +86,17 @@ def test_resets_and_their_frames_are_one_count_everywhere(tiny_model, tmp_path: 
     assert f"{run['projections']['resets_total']} time(s) in all" in physics_summary(result)
 
 
+def test_the_search_fallback_is_chosen_per_run(tmp_path: Path) -> None:
+    """On or off per run; the search controller has none (it searches every motion), and asking for both
+    is one line before any work."""
+    on = GenerateConfig().with_search_fallback(True)
+    assert on.projection.fallback and not on.with_search_fallback(False).projection.fallback
+    assert not on.with_controller("search").projection.fallback  # the search replaces the tracker outright
+    res = run("generate", "a person jumps", "-o", tmp_path / "o", "--controller", "search", "--search-fallback")
+    assert res.returncode == 1 and "--search-fallback is for the tracker" in res.stderr
+    assert "Traceback" not in res.stderr and not (tmp_path / "o").exists()
+
+
 @pytest.mark.slow
 def test_the_search_fallback_is_recorded_where_it_took_over(tiny_model, tmp_path: Path) -> None:
     """One P with the search as the tracker's fallback on the tiny model's run (which the tracker resets):
@@ -303,7 +314,8 @@ def test_console_script_generate_morph_writes_the_same_files(tmp_path: Path) -> 
     assert names["morph"] == names["none"]
     run_log = json.loads((tmp_path / "morph" / "generate.json").read_text())["runs"][-1]
     assert run_log["settings"]["physics"] == "morph"
-    assert run_log["settings"]["morph_projection"] == {"reset_on_fail": False, "tau": 0.5, "sim_dt": 1 / 360}
+    assert run_log["settings"]["morph_projection"] == {"reset_on_fail": False, "tau": 0.5, "sim_dt": 1 / 360,
+                                                       "search_fallback": False}
     assert run_log["projections"]["imitation_failures"] in (0, 1)
     assert 0.0 <= run_log["projections"]["imitation_failure_rate"] <= 1.0
     assert isinstance(run_log["motions"][0]["imitation_failed"], bool)

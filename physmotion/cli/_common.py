@@ -96,6 +96,10 @@ CONTROLLER_HELP = ("Who drives the simulated humanoid: 'tracker' (the model-base
                    "hand on the pelvis), 'policy' (the learned imitation policy over it, physmotion train "
                    "imitator) or 'search' (no outside hand at all: the body's own joint targets searched; "
                    "seconds of CPU per second of motion).")
+SEARCH_FALLBACK_HELP = ("Where the tracker (or the policy) falls and is reset, or keeps under 0.8 of a "
+                        "flight (both feet off the floor), project that motion again with the search: no "
+                        "outside hand, jumps keep their flight, for seconds of CPU per second of motion on "
+                        "those motions (results/flight_kept_fallback.md) (default: off).")
 POLICY_HELP = ("With --controller policy: the policy folder (the shipped one if left out). With --controller search: a "
                "policy that proposes each window's first mean (amortized search, `train student`).")
 PREVIEW_HELP = ("Write a GIF preview beside the output, <stem>.gif (under a second for a 6 s motion; "

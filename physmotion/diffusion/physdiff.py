@@ -30,9 +30,10 @@ from physmotion.physics.projection import ProjectionConfig, SimRecord, project
 
 
 def projection_settings(config: ProjectionConfig) -> dict[str, bool | float]:
-    """How P treats a fall and the step it simulates at (``--fine-step`` halves it), as recorded with
-    generated files and evaluation tables."""
-    return {"reset_on_fail": config.reset_on_fail, "tau": config.tau, "sim_dt": config.humanoid.sim_dt}
+    """How P treats a fall, the step it simulates at (``--fine-step`` halves it) and whether the search
+    is the tracker's fallback, as recorded with generated files and evaluation tables."""
+    return {"reset_on_fail": config.reset_on_fail, "tau": config.tau, "sim_dt": config.humanoid.sim_dt,
+            "search_fallback": config.fallback}
 
 
 def parse_schedule(spec: str, steps: int) -> list[int]:

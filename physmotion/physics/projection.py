@@ -98,6 +98,12 @@ class ProjectionConfig:
     # (docs/decisions/projection.md: "the search as the tracker's fallback").
     fallback: bool = False
     fallback_flight: float = 0.8
+    # A first frame off the path of the next ones (its fastest joint moves into frame 1 more than
+    # ``first_frame_margin`` beyond the fastest move of frame 1 -> 2: a denoiser's boundary artefact) is
+    # replaced by the pose extrapolated back from frames 1 and 2 before P starts the body there; else the
+    # output carries the jump (docs/decisions/sampling.md: "P starts from the motion's own path").
+    mend_first_frame: bool = False
+    first_frame_margin: float = 0.02  # m
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.crossfade <= 2.0:
@@ -115,6 +121,8 @@ class ProjectionConfig:
             raise ShapeError("ilc_passes is for the tracker and the policy, not the search controller")
         if self.fallback and self.controller == "search":
             raise ShapeError("the search fallback is for the tracker and the policy; the search has none")
+        if not self.first_frame_margin >= 0.0:
+            raise ShapeError(f"first_frame_margin must be >= 0 metres, got {self.first_frame_margin}")
         if not 0.0 <= self.fallback_flight <= 1.0:
             raise ShapeError(f"fallback_flight must be in 0..1, got {self.fallback_flight}")
 
@@ -127,7 +135,8 @@ class ProjectionConfig:
         humanoid = self.humanoid
         if controller == "search":
             humanoid = search_humanoid(humanoid)
-        return replace(self, controller=controller, policy=policy, search=search or self.search, humanoid=humanoid)
+        return replace(self, controller=controller, policy=policy, search=search or self.search, humanoid=humanoid,
+                       fallback=self.fallback and controller != "search")  # the search has no fallback
 
     def residual_bound(self) -> float:
         """The cap on the root residual's force (x body weight) of whoever drives the humanoid: the
@@ -167,6 +176,7 @@ class ProjectionConfig:
             "tracking": TrackingConfig(feet_balance=False, residual_force=0.3),
             "humanoid": HumanoidConfig(residual_every=4),
             "shaping": ShapingConfig(ballistic_flight=False, hover_support=0.05),
+            "mend_first_frame": True,
         }
         return cls(**{**defaults, **overrides})
 
@@ -414,6 +424,8 @@ def _policy(path: str | None):
 def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig,
                  on_step: Callable[[int, int], None] | None = None) -> dict[str, np.ndarray]:  # fmt: skip
     """P of one motion x (T, 22, 3) float64: the fields of :class:`ProjectedMotion` for it."""
+    if config.mend_first_frame:
+        x = mend_first_frame(x, config.first_frame_margin)
     ctrl_fps = 1.0 / config.humanoid.control_dt
     prep = prepare_motion(x, fps, config)
     body, model, lift, target, grounded = prep.body, prep.model, prep.lift, prep.target, prep.grounded
@@ -438,6 +450,19 @@ def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig,
     if config.fallback and _falls_short(tracked, x, config.fallback_flight):
         return _fallback(tracked, x, fps, config, on_step)
     return tracked
+
+
+def mend_first_frame(x: np.ndarray, margin: float) -> np.ndarray:
+    """x (T, 22, 3) with frame 0 replaced by 2 x[1] - x[2] where its fastest joint's move into frame 1
+    passes the fastest move of frame 1 -> 2 by more than ``margin`` metres; x itself otherwise."""
+    if len(x) < 3:
+        return x
+    first, second = (float(np.linalg.norm(x[i + 1] - x[i], axis=-1).max()) for i in (0, 1))
+    if first <= second + margin:
+        return x
+    out = x.copy()
+    out[0] = 2.0 * x[1] - x[2]
+    return out
 
 
 def _falls_short(out: dict[str, np.ndarray], x: np.ndarray, flight: float) -> bool:

@@ -1,0 +1,42 @@
+"""experiments/flight_kept.py's pieces that run without a model: its variants of generation's P and its
+CPU clock, which must see the worker pool that lives on between P's calls."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from experiments.flight_kept import VARIANTS, _cpu_wall, _variant
+from physmotion.physics.projection import ProjectionConfig
+
+
+def test_every_variant_is_the_sampling_preset_with_one_change() -> None:
+    base = ProjectionConfig.sampling()
+    assert _variant("sampling") == base
+    for name in VARIANTS[1:]:
+        assert _variant(name) != base, name
+    assert _variant("fallback").fallback and not base.fallback
+    with pytest.raises(ValueError, match="unknown variant"):
+        _variant("bogus")
+
+
+def _spin(n: int) -> int:
+    total = 0
+    for i in range(n):
+        total += i * i % 7
+    return total
+
+
+def test_the_cpu_clock_counts_live_worker_processes() -> None:
+    """Work done in P's persistent worker pool (physics/workers.py) is counted while the workers live."""
+    from physmotion.physics.workers import map_in_workers
+
+    map_in_workers(_spin, [10, 10], workers=2)  # the pool started, its processes alive
+    before = _cpu_wall()
+    own = time.process_time()
+    map_in_workers(_spin, [8_000_000, 8_000_000], workers=2)
+    own = time.process_time() - own
+    cpu, wall = _cpu_wall() - before
+    print(f"\nCPU {cpu:.2f} s in {wall:.2f} s of wall time, {own:.2f} s of it this process's")
+    assert own < 0.1 and cpu >= 0.6  # two workers' loops (about 0.4 s each); this process only waited
