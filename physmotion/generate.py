@@ -272,9 +272,9 @@ def physics_summary(result: GenerateResult) -> str:
     pooled = pooled_help(result.motions)
     helped = f"; {help_words(*pooled)}" if pooled else ""
     searched = sum(bool(m.searched) for m in result.motions)
-    if searched:  # the search's fallback (ProjectionConfig.fallback): those motions had no outside hand
-        helped += (f"; the search (no outside hand) made {searched} of {len(result.motions)} motions where the "
-                   "tracker fell or flattened a flight (per motion in generate.json: 'searched')")
+    if searched:  # --controller search, or the tracker's fallback where it fell or flattened a flight
+        helped += (f"; the search (no outside hand) made {searched} of {len(result.motions)} motions (per motion "
+                   "in generate.json: 'searched')")
     if result.imitation_failed:  # morph: a failed imitation keeps the sampled motion, nothing is reset
         n, failed = len(result.imitation_failed), int(sum(result.imitation_failed))
         return (f"the simulated humanoid imitated {n - failed} of {n} motions; "

@@ -110,7 +110,7 @@ def test_the_help_in_full_and_the_reset_frames_travel_with_the_motion(tmp_path: 
     Motion(_standing(), residual=peak / 2, residual_peak=peak, residual_at_cap=at_cap, reset_frames=reset,
            resets=1).save(tmp_path / "p.npz")  # fmt: skip
     back = Motion.load(tmp_path / "p.npz")
-    assert back.searched is None  # P's tracker or no P: nothing said
+    assert back.searched is None  # not given: not recorded
     Motion(_standing(), residual=np.zeros((10, 2)), resets=0, searched=True).save(tmp_path / "s.npz")
     assert Motion.load(tmp_path / "s.npz").searched is True
     np.testing.assert_array_equal(back.residual_peak, peak.astype(np.float32))
