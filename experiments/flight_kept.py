@@ -10,9 +10,10 @@ with that physics mode against the plain sample of the same prompt and seed; eve
 sample flight where the sample flies, :mod:`physmotion.metrics.dynamics`), the share of outputs with a
 reset, jumps past the sample's largest frame step + 2 cm, the root help (force and torque p95, share
 held at a cap), Phys-Err, the share of outputs the search made (``ProjectionConfig.fallback``), and the
-cost: CPU seconds (this process and its finished worker processes) per second of output motion, and
-wall seconds per output; a mode's cost includes sampling. The prompts are the jump and hop categories of the unseen-prompt benchmark
-(``experiments/prompts.py`` ``NEW_PROMPTS``) and :data:`FRESH`, written for this study.
+cost: CPU seconds (this process and P's worker processes) per second of output motion, and wall
+seconds per output; a mode's cost includes sampling. The prompts are the jump and hop categories of the
+unseen-prompt benchmark (``experiments/prompts.py`` ``NEW_PROMPTS``) and :data:`FRESH`, written for this
+study.
 """
 
 from __future__ import annotations
