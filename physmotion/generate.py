@@ -68,7 +68,7 @@ class GenerateConfig:
 
     def with_search_fallback(self, on: bool) -> GenerateConfig:
         """This run with the search as the tracker's fallback in PhysDiff's and post's P, or without it
-        (``ProjectionConfig.fallback``; ``generate --search-fallback/--no-search-fallback``)."""
+        (``ProjectionConfig.fallback``; ``generate --search-fallback``)."""
         if on and self.projection.controller == "search":
             raise PhysmotionError("--search-fallback is for the tracker and the policy; --controller search "
                                   "searches every motion already")

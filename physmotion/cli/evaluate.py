@@ -47,8 +47,7 @@ def evaluate_cmd(
     quick: bool = typer.Option(False, "--quick", help="Smoke run: 32 motions, 2 repeats, 10 steps."),
     controller: str = typer.Option("tracker", help=CONTROLLER_HELP),
     policy: Path | None = typer.Option(None, help=POLICY_HELP),
-    search_fallback: bool | None = typer.Option(None, "--search-fallback/--no-search-fallback",
-                                                help=SEARCH_FALLBACK_HELP),
+    search_fallback: bool = typer.Option(False, "--search-fallback", help=SEARCH_FALLBACK_HELP),
     out: Path = typer.Option(Path("results/evaluate"), "-o", "--out", help="Writes <out>.md and <out>.json."),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
@@ -71,8 +70,8 @@ def evaluate_cmd(
     cfg.base.sampler = _with(default_sampler(net), steps=cfg.base.sampler.steps if quick else steps,
                              sampler=sampler, eta=eta, cfg_scale=cfg_scale)
     cfg.base = cfg.base.with_controller(controller, _opt_str(policy))
-    if search_fallback is not None:
-        cfg.base = cfg.base.with_search_fallback(search_fallback)
+    if search_fallback:
+        cfg.base = cfg.base.with_search_fallback(True)
     with _step_bar("evaluating") as tick, _as_options(**SAMPLER_OPTIONS):
         table = evaluate(net, judge, data, cfg, on_progress=tick)
     paths = table.write(out)

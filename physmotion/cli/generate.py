@@ -137,8 +137,7 @@ def generate_cmd(
                                    "1.3-1.4x PhysDiff's time (experiments/generate_speed.py)."),
     controller: str = typer.Option("tracker", help=CONTROLLER_HELP),
     policy: Path | None = typer.Option(None, help=POLICY_HELP),
-    search_fallback: bool | None = typer.Option(None, "--search-fallback/--no-search-fallback",
-                                                help=SEARCH_FALLBACK_HELP),
+    search_fallback: bool = typer.Option(False, "--search-fallback", help=SEARCH_FALLBACK_HELP),
     preview: bool = typer.Option(True, help="Write a GIF preview per motion."),
     in_place: bool = typer.Option(False, "--in-place", help="Remove the root's horizontal travel (heading "
                                   "and height kept), for game loops."),
@@ -181,8 +180,8 @@ def generate_cmd(
     cfg.seconds = seconds  # None: each prompt's length predicted from its text
     cfg = cfg.at_fine_step() if fine_step else cfg
     cfg = cfg.with_controller(controller, _opt_str(policy))
-    if search_fallback is not None:
-        cfg = cfg.with_search_fallback(search_fallback)
+    if search_fallback:
+        cfg = cfg.with_search_fallback(True)
     check_outputs(texts, out, cfg, overwrite)
     net = MotionDiffusion.load(model)
     cfg.sampler = _with(default_sampler(net), sampler=sampler, steps=steps, eta=eta, cfg_scale=cfg_scale,
