@@ -41,8 +41,8 @@ class Motion:
     (force, lift or torque); reset_frames: (T,) bool, frames that are not simulated: where the humanoid
     was put back on the motion and the cross-fade before it (``ProjectedMotion.reset_frames``, over every
     P call that made the motion). Each None where P was not applied (or the file predates it).
-    searched: for P's output, whether the search (no outside hand) made it in place of the tracker
-    (``ProjectedMotion.searched``, in any P call); None where P was not applied.
+    searched: for P's output, whether the search (no outside hand) made it, as the controller or as the
+    tracker's fallback (``ProjectedMotion.searched``, in any P call); None where P was not applied.
     """
 
     joints: np.ndarray

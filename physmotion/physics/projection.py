@@ -223,8 +223,8 @@ class ProjectedMotion:
     over_limit: (B, T) bool, frames in which a hinge's total torque (actuator plus the joint torques the
     tracker's feet-balance path applies directly) passed the actuator's force limit: the actuators alone
     are bounded, that path is not (:func:`~physmotion.physics.sim.control_step`).
-    searched: (B,) bool, the search took over from the tracker (``ProjectionConfig.fallback``): no outside
-    hand on that motion.
+    searched: (B,) bool, the search made the motion (``controller`` "search", or as the tracker's
+    ``fallback``): no outside hand on it.
     teacher_obs, teacher_offsets: with the search controller only, per control step of the simulation
     (B, N, 599) float32 the observation a policy would see (:func:`physmotion.physics.policy.observe`, cap
     0) and (B, N, 63) the joint-target offsets the search committed (rad): a policy's teacher labels.
@@ -276,8 +276,8 @@ class SimRecord:
     resets: times the humanoid was put back on the motion; residual, residual_peak: (T, 2) float32 root
     residual per frame, mean and peak (force x W, torque x W x 1 m); at_cap: (T,) bool, a residual update
     held at a cap; over_limit: (T,) bool, a joint's torque past its actuator's limit; reset_frames: (T,)
-    bool, frames not simulated (a reset and the cross-fade before it); searched: the search made it, not
-    the tracker (``ProjectionConfig.fallback``)."""
+    bool, frames not simulated (a reset and the cross-fade before it); searched: the search made it
+    (``ProjectionConfig.controller`` or ``fallback``)."""
 
     resets: int
     residual: np.ndarray
