@@ -93,8 +93,10 @@ def measure(seeds: list[int], seconds: float, variants: list[str], modes: list[s
         cfg = GenerateConfig(seconds=seconds, physics="none", seed=seed)
         plain += [m.joints for m in generate(prompts, cfg, model=model).motions]
         for mode in modes:
-            runs = {mode: cfg.projection, f"{mode} +fallback": replace(cfg.projection, fallback=True)}
-            for name, projection in list(runs.items())[: 2 if fallback else 1]:
+            runs = {mode: cfg.projection}
+            if fallback:
+                runs[f"{mode} +fallback"] = replace(cfg.projection, fallback=True)
+            for name, projection in runs.items():
                 start = _cpu_wall()
                 res = generate(prompts, replace(cfg, physics=mode, projection=projection), model=model)
                 outputs.setdefault(name, []).extend(res.motions)

@@ -482,8 +482,7 @@ def _fallback(tracked: dict[str, np.ndarray], x: np.ndarray, fps: float, config:
     """The search's projection of x in place of the tracker's output ``tracked``, on the search's body
     (:func:`search_humanoid`), unless the search did worse (reset more often, or failed where the tracker
     did not); a teacher's records are dropped, so a batch stacks alike."""
-    searching = replace(config, controller="search", fallback=False, ilc_passes=0,
-                        humanoid=search_humanoid(config.humanoid))  # fmt: skip
+    searching = replace(config, ilc_passes=0).with_controller("search")
     out = _search_one(prepare_motion(x, fps, searching), x, fps, searching, on_step)
 
     def worse(o: dict) -> tuple[int, bool]:
