@@ -57,8 +57,11 @@ def _policy(folder: str):
     return load_policy(folder)
 
 
-def _evaluate(job: tuple[str, dict, np.ndarray, float]) -> dict:
-    """One (row, motion): carried, survived share, MPJPE world / pelvis-relative, CPU seconds."""
+def evaluate_row(job: tuple[str, dict, np.ndarray, float]) -> dict:
+    """One (row name, row spec, joints (T, 22, 3) metres Y-up, fps) from its first frame: control steps survived
+    and in all, world / pelvis-relative MPJPE (m, over the survived steps), CPU seconds, seconds of motion.
+    A spec's "kind": "tracker" (with "hand"), "search" ("config", optional "proposal" policy folder),
+    "expert" (the MPPI labeller) or "policy" ("folder")."""
     from physmotion.physics.search import SearchController, no_hand
     from physmotion.physics.tracking import ModelBasedTracker
 
@@ -106,9 +109,55 @@ def _errors(model, qpos: np.ndarray, target: np.ndarray) -> tuple[float, float]:
     return float(np.mean(err)), float(np.mean(rel))
 
 
-def main(argv: list[str] | None = None) -> dict:
+def heldout_motions(data: str, captured: int, max_seconds: float, prompts: int,
+                    seed: int) -> tuple[list, list[tuple[str, np.ndarray, float]], list[str]]:  # fmt: skip
+    """The evaluation set: the first ``captured`` unmirrored clips of ``data``'s test split (at most
+    ``max_seconds`` each) and plain samples (4 s, default model, seed) of the first ``prompts`` of
+    FAST_PROMPTS + HELDOUT_PROMPTS. Returns (the test clips, [(set, joints (T, 22, 3), fps)], the prompts)."""
+    from physmotion.generate import GenerateConfig, generate
+
+    test = [c for c in dataset_clips(data, "test") if not c.name.startswith("M")][:captured]
+    motions = [("captured", c.joints[: int(max_seconds * c.fps)], c.fps) for c in test]
+    texts = (list(FAST_PROMPTS.values()) + list(HELDOUT_PROMPTS.values()))[:prompts]
+    gen = generate(texts, GenerateConfig(seconds=4.0, num=1, physics="none", seed=seed))
+    return test, motions + [("generated", m.joints, float(m.fps)) for m in gen.motions], texts
+
+
+def evaluate_rows(rows: dict[str, dict], motions: list[tuple[str, np.ndarray, float]],
+                  workers: int = 0) -> tuple[list[str], list[list[str]], list[dict]]:  # fmt: skip
+    """Every row ({name: spec}, :func:`evaluate_row`) on every motion of :func:`heldout_motions`. Returns
+    (table header, table rows, per row its figures per set: motions, completed, survived, MPJPE mm,
+    CPU s / s)."""
     from physmotion.physics.workers import imap_in_workers
 
+    jobs = [(name, spec, j, fps) for name, spec in rows.items() for _, j, fps in motions]
+    sets = [s for _ in rows for s, _, _ in motions]
+    results: list = [None] * len(jobs)
+    for i, res in imap_in_workers(evaluate_row, jobs, workers):
+        results[i] = res | {"set": sets[i]}
+    table, json_rows = [], []
+    for name in rows:
+        cells = [name]
+        entry = {"row": name}
+        for s in ("captured", "generated"):
+            rs = [r for r in results if r["row"] == name and r["set"] == s]
+            done = np.mean([r["survived"] == r["steps"] for r in rs])
+            share = sum(r["survived"] for r in rs) / sum(r["steps"] for r in rs)
+            err = np.nanmean([r["mpjpe"] for r in rs]) * 1000
+            rel = np.nanmean([r["mpjpe_rel"] for r in rs]) * 1000
+            cpu = sum(r["cpu"] for r in rs) / sum(r["seconds"] for r in rs)
+            entry[s] = {"motions": len(rs), "completed": float(done), "survived": float(share), "mpjpe_mm": float(err),
+                        "mpjpe_rel_mm": float(rel), "cpu_s_per_s": float(cpu)}  # fmt: skip
+            cells += [f"{100 * done:.0f} %", f"{share:.2f}", f"{err:.0f} / {rel:.0f}", f"{cpu:.2f}"]
+        table.append(cells)
+        json_rows.append(entry)
+    header = ["controller (no outside hand unless 'hand on')"]
+    for s in ("captured", "generated"):
+        header += [f"{s}: to the end", f"{s}: share survived", f"{s}: MPJPE world / pel-rel mm", f"{s}: CPU s / s"]
+    return header, table, json_rows
+
+
+def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--teacher", default="runs/teacher")
     ap.add_argument("--data", default="data_build/all")
@@ -149,15 +198,7 @@ def main(argv: list[str] | None = None) -> dict:
     pairs = fits[list(fits)[-1]]["pairs"]
     _policy.cache_clear()
 
-    # evaluation set
-    test = [c for c in dataset_clips(args.data, "test") if not c.name.startswith("M")][: args.captured_test]
-    motions = [("captured", c.joints[: int(args.max_seconds * c.fps)], c.fps) for c in test]
-    from physmotion.generate import GenerateConfig, generate
-
-    prompts = (list(FAST_PROMPTS.values()) + list(HELDOUT_PROMPTS.values()))[: args.prompts]
-    gen = generate(prompts, GenerateConfig(seconds=4.0, num=1, physics="none", seed=args.seed))
-    motions += [("generated", m.joints, float(m.fps)) for m in gen.motions]
-
+    test, motions, prompts = heldout_motions(args.data, args.captured_test, args.max_seconds, args.prompts, args.seed)
     rows: dict[str, dict] = {"tracker, hand on": {"kind": "tracker", "hand": True},
                              "tracker, hand off": {"kind": "tracker", "hand": False}}  # fmt: skip
     if args.full_search:
@@ -173,30 +214,7 @@ def main(argv: list[str] | None = None) -> dict:
         rows[f"search {name}"] = {"kind": "search", "config": conf}
         rows[f"amortized: {current.split('/')[-1]} + search {name}"] = {"kind": "search", "config": conf,
                                                                         "proposal": current}  # fmt: skip
-    jobs = [(name, spec, j, fps) for name, spec in rows.items() for _, j, fps in motions]
-    sets = [s for name in rows for s, _, _ in motions]
-    results: list = [None] * len(jobs)
-    for i, res in imap_in_workers(_evaluate, jobs, args.workers):
-        results[i] = res | {"set": sets[i]}
-    table, json_rows = [], []
-    for name in rows:
-        cells = [name]
-        entry = {"row": name}
-        for s in ("captured", "generated"):
-            rs = [r for r in results if r["row"] == name and r["set"] == s]
-            done = np.mean([r["survived"] == r["steps"] for r in rs])
-            share = sum(r["survived"] for r in rs) / sum(r["steps"] for r in rs)
-            err = np.nanmean([r["mpjpe"] for r in rs]) * 1000
-            rel = np.nanmean([r["mpjpe_rel"] for r in rs]) * 1000
-            cpu = sum(r["cpu"] for r in rs) / sum(r["seconds"] for r in rs)
-            entry[s] = {"motions": len(rs), "completed": float(done), "survived": float(share), "mpjpe_mm": float(err),
-                        "mpjpe_rel_mm": float(rel), "cpu_s_per_s": float(cpu)}  # fmt: skip
-            cells += [f"{100 * done:.0f} %", f"{share:.2f}", f"{err:.0f} / {rel:.0f}", f"{cpu:.2f}"]
-        table.append(cells)
-        json_rows.append(entry)
-    header = ["controller (no outside hand unless 'hand on')"]
-    for s in ("captured", "generated"):
-        header += [f"{s}: to the end", f"{s}: share survived", f"{s}: MPJPE world / pel-rel mm", f"{s}: CPU s / s"]
+    header, table, json_rows = evaluate_rows(rows, motions, args.workers)
     n_cap = sum(1 for s, _, _ in motions if s == "captured")
     text = (f"# Learning a fast controller from the search (no outside hand)\n\nWritten by "
             f"`python -m experiments.learn_from_search` (its docstring defines methods and columns). Teacher: "

@@ -326,7 +326,7 @@ def train_student(records: Sequence[dict], out: str | Path, config: StudentConfi
     cfg, lab = config or StudentConfig(), labeller or Labeller()
     root = Path(out)
     if lab.temperature is not None:
-        got = map_in_workers(partial(_expert_one, labeller=lab, action_scale=cfg.action_scale), list(records),
+        got = map_in_workers(partial(expert_episode, labeller=lab, action_scale=cfg.action_scale), list(records),
                              workers)  # fmt: skip
         x, y = np.concatenate([a for a, _, _, _ in got]), np.concatenate([b for _, b, _, _ in got])
         g = np.concatenate([np.full(len(a), i) for i, (a, _, _, _) in enumerate(got)])
@@ -338,7 +338,7 @@ def train_student(records: Sequence[dict], out: str | Path, config: StudentConfi
     folders = {"BC": str(save_student(root / "bc", weights, student_settings(cfg), card(cfg, "BC", records, stats)))}
     log(f"BC: {len(x)} pairs, validation MSE {stats['val_mse']:.3f} (0 predicted: {stats['val_mse_zero']:.3f})")
     for r in range(1, dagger_rounds + 1):
-        step = partial(_dagger_one, labeller=replace(lab, seed=lab.seed if lab.temperature is not None else
+        step = partial(dagger_episode, labeller=replace(lab, seed=lab.seed if lab.temperature is not None else
                                                      cfg.seed * 1000 + r), action_scale=cfg.action_scale)  # fmt: skip
         got = map_in_workers(step, [(rec, folders[list(folders)[-1]]) for rec in records], workers)
         x = np.concatenate([x] + [a for a, _, _, _ in got])
@@ -355,8 +355,10 @@ def train_student(records: Sequence[dict], out: str | Path, config: StudentConfi
     return folders
 
 
-def _expert_one(record: dict, labeller: Labeller, action_scale: float) -> tuple[np.ndarray, np.ndarray, int, int]:
-    """A record's reference driven by the :class:`Expert`: its labelled states, steps survived, steps."""
+def expert_episode(record: dict, labeller: Labeller, action_scale: float) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """A reference driven by the :class:`Expert` (``record``: "joints" (T, 22, 3) metres Y-up, "fps", "push"
+    (6,), as a teacher record has them): observations (M, 599) and labels (M, 63) in [-1, 1] of its labelled
+    states, control steps survived, control steps."""
     import mujoco
 
     from physmotion.physics.policy import observe
@@ -378,8 +380,9 @@ def _expert_one(record: dict, labeller: Labeller, action_scale: float) -> tuple[
     return x, y, c.survived, c.steps
 
 
-def _dagger_one(job: tuple[dict, str], labeller: Labeller, action_scale: float) -> tuple[np.ndarray, np.ndarray, int, int]:
-    """A training record driven by the student in a policy folder: its labelled pairs, steps survived, steps."""
+def dagger_episode(job: tuple[dict, str], labeller: Labeller, action_scale: float) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """A training record (:func:`expert_episode`'s keys) driven by the student in a policy folder (``job``:
+    (record, folder)): its labelled pairs, control steps survived, control steps."""
     from physmotion.physics.policy import load_policy
 
     record, folder = job

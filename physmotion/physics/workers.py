@@ -58,7 +58,8 @@ def map_in_workers(fn: Callable[[T], R], items: Sequence[T], workers: int = 0) -
 def imap_in_workers(fn: Callable[[T], R], items: Sequence[T], workers: int = 0) -> Iterator[tuple[int, R]]:
     """``(index, fn(item))`` for every item, in the order they finish, in worker processes when there is more
     than one item and core (:func:`map_in_workers`' rules). An exception raised by ``fn`` is raised here
-    once the item's turn comes; items finished before it have been yielded."""
+    once the item's turn comes; items finished before it have been yielded. Closing the iterator early
+    cancels the items not yet started."""
     n = worker_count(workers, len(items))
     if n == 1 or multiprocessing.current_process().daemon:
         for i, x in enumerate(items):
@@ -67,8 +68,12 @@ def imap_in_workers(fn: Callable[[T], R], items: Sequence[T], workers: int = 0) 
     try:
         pool = _get_pool(n)
         futures = {pool.submit(fn, x): i for i, x in enumerate(items)}
-        for future in as_completed(futures):
-            yield futures[future], future.result()
+        try:
+            for future in as_completed(futures):
+                yield futures[future], future.result()
+        finally:  # a caller that stops early (an error, a deadline) cancels the items not yet started
+            for future in futures:
+                future.cancel()
     except BrokenProcessPool:
         _shutdown()
         raise PhysmotionError("a worker process died (out of memory, or killed); what finished is written") from None

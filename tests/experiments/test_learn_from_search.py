@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.learn_from_search import _evaluate
+from experiments.learn_from_search import evaluate_row
 from experiments.teacher_data import EVAL_PROMPTS, synthetic_prompts
 from physmotion.imitator.clips import dataset_clips
 from physmotion.physics.search import SearchConfig
@@ -24,10 +24,10 @@ def test_synthetic_prompts_are_train_captions_and_never_an_evaluation_prompt(sma
 def test_a_row_is_measured_with_the_search_s_fall(small_built_dir: Path) -> None:
     clip = next(c for c in dataset_clips(small_built_dir, "train") if "_run_" in c.name and c.name[0] != "M")
     joints = clip.joints[:40]
-    off = _evaluate(("off", {"kind": "tracker", "hand": False}, joints, clip.fps))
-    on = _evaluate(("on", {"kind": "tracker", "hand": True}, joints, clip.fps))
+    off = evaluate_row(("off", {"kind": "tracker", "hand": False}, joints, clip.fps))
+    on = evaluate_row(("on", {"kind": "tracker", "hand": True}, joints, clip.fps))
     tiny = SearchConfig(candidates=4, rounds=1, elites=2, horizon=3, retries=0, rollback=0)
-    searched = _evaluate(("s", {"kind": "search", "config": tiny}, joints, clip.fps))
+    searched = evaluate_row(("s", {"kind": "search", "config": tiny}, joints, clip.fps))
     assert on["survived"] == on["steps"] > off["survived"]  # the hand keeps the run up; without it, it falls
     assert off["steps"] == searched["steps"] == round(39 / 20 * 30) + 1 - 1  # control steps after the first
     for r in (off, on, searched):

@@ -1,0 +1,247 @@
+"""Learning from the search at scale: does the student (BC, then DAgger, on the MPPI labeller's consistent
+labels) get better with many more labelled states? Writes results/learn_at_scale.md and .json.
+
+Three stages, so that the costly one can run on a bigger machine (issue 63, item 5):
+
+    python -m experiments.learn_at_scale refs  [--data data_build/all] [--captured 700] [--motions 250]
+                                               [--out runs/scale/refs.npz]
+    python -m experiments.learn_at_scale label [--refs runs/scale/refs.npz] [--out runs/scale/pairs]
+                                               [--workers 0] [--minutes 0]
+    python -m experiments.learn_at_scale fit   [--refs ...] [--pairs ...] [--out runs/scale/students]
+                                               [--dagger-refs 120] [--captured-test 10]
+
+- ``refs``: the training references, as experiments/teacher_data.py makes its jobs (physmotion/imitator/
+  teacher.py: segments of at most 4 s, each from a plain and a pushed start): the first ``--captured`` jobs of
+  the built dataset's train split (mirrors included) and every job of ``--motions`` plain samples (4 s,
+  default model) of Morph's synthetic prompts (train captions, never an evaluation prompt), the two kinds
+  interleaved so that any prefix holds both.
+- ``label``: the MPPI labeller as the :class:`~physmotion.imitator.student.Expert` drives each reference in
+  that order (:func:`~physmotion.imitator.student.expert_episode`) in worker processes, until every reference
+  is done or ``--minutes`` have passed; its labelled (observation, offset) pairs are written as they come, in
+  chunks of at most 5,000 (``pairs_NNN.npz``, atomically), with ``index.json`` (per reference: steps
+  survived, pairs; the wall time and workers). Needs numpy, scipy and MuJoCo only.
+- ``fit``: BC students on growing prefixes of the labelled references (1/8, 1/4, 1/2, all: a curve of success
+  against labelled pairs, one StudentConfig), then one DAgger round from the all-data student on the first
+  ``--dagger-refs`` references (the student drives them, its visited states are labelled, refit on all).
+  Every student, the bare tracker and the labeller as a controller are evaluated with no outside hand on
+  experiments/learn_from_search.py's held-out set and columns.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from functools import partial
+from pathlib import Path
+
+import numpy as np
+
+CHUNK = 5000  # pairs per file: 5,000 x 599 float32 stay under a 16 MiB transfer limit
+
+
+def _refs(args: argparse.Namespace) -> None:
+    from experiments.teacher_data import generated_clips, synthetic_prompts
+    from physmotion.imitator.clips import dataset_clips
+    from physmotion.imitator.teacher import TeacherConfig, teacher_jobs
+    from physmotion.motion import write_atomic
+
+    config = TeacherConfig(seed=args.seed)
+    captured = teacher_jobs(dataset_clips(args.data, "train"), config)[: args.captured]
+    texts = synthetic_prompts(args.data, args.motions, args.seed)
+    generated = teacher_jobs(generated_clips(texts, config.segment_seconds, args.seed), config)
+    jobs = [j for pair in zip(captured, generated) for j in pair]
+    jobs += captured[len(generated) :] + generated[len(captured) :]
+    segments: dict[tuple[str, int], int] = {}  # a plain and a pushed start share their segment's joints
+    for j in jobs:
+        segments.setdefault((j.source, j.start), len(segments))
+    first = {key: next(j for j in jobs if (j.source, j.start) == key) for key in segments}
+    lengths = np.array([len(first[k].joints) for k in segments])
+    arrays = {
+        "joints": np.concatenate([first[k].joints for k in segments]).astype(np.float32),  # (sum T, 22, 3)
+        "offsets": np.r_[0, np.cumsum(lengths)], "segment": np.array([segments[(j.source, j.start)] for j in jobs]),
+        "fps": np.array([j.fps for j in jobs]), "push": np.stack([j.push for j in jobs]),
+        "name": np.array([j.id for j in jobs]), "origin": np.array([j.origin for j in jobs]),
+        "licence_tag": np.array([j.licence_tag for j in jobs]), "prompts": np.array(texts),
+    }  # fmt: skip
+    write_atomic(args.out, lambda f: np.savez_compressed(f, **arrays))
+    print(f"{len(jobs)} references ({len(captured)} captured, {len(generated)} generated), "
+          f"{sum(len(j.joints) / j.fps for j in jobs):.0f} s of motion -> {args.out}")  # fmt: skip
+
+
+def load_refs(path: str | Path) -> list[dict]:
+    """The references ``refs`` wrote, in labelling order, as records (:func:`expert_episode`'s keys, with
+    "name", "origin" and "licence_tag")."""
+    with np.load(path) as z:
+        a = {k: z[k] for k in z.files}
+    out = []
+    for i, seg in enumerate(a["segment"]):
+        joints = a["joints"][a["offsets"][seg] : a["offsets"][seg + 1]]
+        out.append({"joints": joints, "fps": float(a["fps"][i]), "push": a["push"][i], "name": str(a["name"][i]),
+                    "origin": str(a["origin"][i]), "licence_tag": str(a["licence_tag"][i])})  # fmt: skip
+    return out
+
+
+def _label(args: argparse.Namespace) -> None:
+    from physmotion.imitator.student import Labeller, StudentConfig, expert_episode
+    from physmotion.motion import write_atomic
+    from physmotion.physics.workers import imap_in_workers, worker_count
+
+    everything = load_refs(args.refs)
+    refs = everything[args.start : args.start + args.limit if args.limit else None]
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    fn = partial(expert_episode, labeller=Labeller(), action_scale=StudentConfig().action_scale)
+    workers = worker_count(args.workers, len(refs))
+    t0, deadline = time.time(), time.time() + 60 * args.minutes if args.minutes else float("inf")
+    index: dict = {"references": len(refs), "workers": workers, "done": {}}
+    buf: list[tuple[int, np.ndarray, np.ndarray]] = []
+    chunks = 0
+
+    def flush() -> None:
+        nonlocal buf, chunks
+        if not buf:
+            return
+        x = np.concatenate([b[1] for b in buf])
+        y = np.concatenate([b[2] for b in buf])
+        ref = np.concatenate([np.full(len(b[1]), b[0]) for b in buf])
+        write_atomic(out / f"pairs_{chunks:03d}.npz", lambda f: np.savez_compressed(f, x=x, y=y, ref=ref))
+        chunks, buf = chunks + 1, []
+
+    for n, (i, (x, y, survived, steps)) in enumerate(imap_in_workers(fn, refs, workers), 1):
+        buf.append((args.start + i, x, y))
+        index["done"][refs[i]["name"]] = {"ref": args.start + i, "survived": survived, "steps": steps,
+                                          "pairs": len(x)}  # fmt: skip
+        if sum(len(b[1]) for b in buf) >= CHUNK:
+            flush()
+        index["wall_s"] = round(time.time() - t0, 1)
+        write_atomic(out / "index.json", lambda f: f.write(json.dumps(index)), "w")
+        if n % 10 == 0 or n == len(refs):
+            pairs = sum(d["pairs"] for d in index["done"].values())
+            print(f"{n}/{len(refs)} references, {pairs} pairs, {time.time() - t0:.0f} s", flush=True)
+        if time.time() > deadline:
+            print(f"deadline: {n} of {len(refs)} references labelled", flush=True)
+            break
+    flush()
+    write_atomic(out / "index.json", lambda f: f.write(json.dumps(index)), "w")
+
+
+def load_pairs(folders: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every pair ``label`` wrote in ``folders``: observations (M, 599), labels (M, 63), reference index (M,)."""
+    files = [f for folder in folders for f in sorted(Path(folder).glob("pairs_*.npz"))]
+    parts = [np.load(f) for f in files]
+    return (np.concatenate([p["x"] for p in parts]), np.concatenate([p["y"] for p in parts]),
+            np.concatenate([p["ref"] for p in parts]))  # fmt: skip
+
+
+def _where(indexes: list[dict], machines: list[str]) -> str:
+    return "; ".join(f"{len(ix['done'])} references in {ix['wall_s'] / 60:.1f} min on {ix['workers']} processes "
+                     f"({m})" for ix, m in zip(indexes, machines))  # fmt: skip
+
+
+def _fit(args: argparse.Namespace) -> None:
+    from experiments._results import markdown_table, run_meta, write_results
+    from experiments.learn_from_search import evaluate_rows, heldout_motions
+    from physmotion.imitator.student import (
+        Labeller,
+        StudentConfig,
+        card,
+        dagger_episode,
+        fit_student,
+        save_student,
+        student_settings,
+    )
+    from physmotion.physics.workers import map_in_workers
+
+    refs = load_refs(args.refs)
+    x, y, ref = load_pairs(args.pairs)
+    indexes = [json.loads((Path(p) / "index.json").read_text()) for p in args.pairs]
+    order = sorted({int(d["ref"]) for ix in indexes for d in ix["done"].values()})  # labelled, in labelling order
+    cfg, out = StudentConfig(seed=args.seed), Path(args.out)
+    folders, fits = {}, {}
+    for share in (8, 4, 2, 1):
+        used = order[: max(1, len(order) // share)]
+        keep = np.isin(ref, used)
+        weights, stats = fit_student(x[keep], y[keep], ref[keep], cfg)
+        name = f"BC, {len(used)} references ({stats['pairs']} pairs)"
+        recs = [refs[i] for i in used]
+        folders[name] = str(save_student(out / f"bc_{len(used)}", weights, student_settings(cfg),
+                                         card(cfg, "BC", recs, stats)))  # fmt: skip
+        fits[name] = stats
+        print(f"{name}: validation MSE {stats['val_mse']:.3f} (0 predicted: {stats['val_mse_zero']:.3f})", flush=True)
+    if args.dagger_refs:
+        used = order[: args.dagger_refs]
+        step = partial(dagger_episode, labeller=Labeller(), action_scale=cfg.action_scale)
+        got = map_in_workers(step, [(refs[i], folders[name]) for i in used], args.workers)
+        survived = sum(s for _, _, s, _ in got) / max(sum(n for _, _, _, n in got), 1)
+        x2 = np.concatenate([x] + [a for a, _, _, _ in got])
+        y2 = np.concatenate([y] + [b for _, b, _, _ in got])
+        r2 = np.concatenate([ref] + [np.full(len(a), i) for i, (a, _, _, _) in zip(used, got)])
+        weights, stats = fit_student(x2, y2, r2, cfg)
+        stats["survived_before"] = round(float(survived), 3)
+        name = f"DAgger 1 on {len(used)} references ({stats['pairs']} pairs)"
+        folders[name] = str(save_student(out / "dagger1", weights, student_settings(cfg),
+                                         card(cfg, "DAgger 1", [refs[i] for i in order], stats)))  # fmt: skip
+        fits[name] = stats
+        print(f"{name}: the BC student survived {survived:.2f} of those steps", flush=True)
+
+    test, motions, prompts = heldout_motions(args.data, args.captured_test, args.max_seconds, args.prompts, args.seed)
+    rows: dict[str, dict] = {"tracker, hand off": {"kind": "tracker", "hand": False}}
+    if args.labeller_row:
+        rows["MPPI labeller as a controller (32 x 1, lookahead 15)"] = {"kind": "expert"}
+    rows |= {f"{name} student": {"kind": "policy", "folder": folder} for name, folder in folders.items()}
+    header, table, json_rows = evaluate_rows(rows, motions, args.workers)
+    labelled = [refs[i] for i in order]
+    seconds = sum(len(r["joints"]) / r["fps"] for r in labelled)
+    n_cap = sum(1 for s, _, _ in motions if s == "captured")
+    text = (f"# Learning from the search at scale (no outside hand)\n\nWritten by `python -m "
+            f"experiments.learn_at_scale` (its docstring defines the stages). Labelled: {len(order)} references "
+            f"({sum(r['origin'] == 'captured' for r in labelled)} captured, "
+            f"{sum(r['origin'] == 'generated' for r in labelled)} generated; {seconds:.0f} s of motion), "
+            f"{len(x)} pairs by the MPPI labeller ({_where(indexes, args.label_machines)}). Evaluation: {n_cap} "
+            f"held-out captured clips, {len(motions) - n_cap} generated motions of prompts never used for "
+            f"training, as in results/learn_from_search.md.\n\n{markdown_table(header, table)}\n")  # fmt: skip
+    labelling = [{"folder": p, "machine": m, "wall_s": ix["wall_s"], "workers": ix["workers"],
+                  "references": len(ix["done"])} for p, m, ix in zip(args.pairs, args.label_machines, indexes)]
+    meta = run_meta(__file__, None, args.tree, None, labelling=labelling)
+    payload = {"meta": meta, "rows": json_rows, "fits": fits, "references": len(order), "pairs": int(len(x)),
+               "licence_tags": sorted({r["licence_tag"] for r in labelled if r["licence_tag"]}),
+               "prompts": prompts, "test_clips": [c.name for c in test]}  # fmt: skip
+    write_results(args.results, text, payload)
+    print(text)
+
+
+def main(argv: list[str] | None = None) -> None:
+    from experiments._results import parse_args
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("stage", choices=["refs", "label", "fit"])
+    ap.add_argument("--data", default="data_build/all")
+    ap.add_argument("--refs", default="runs/scale/refs.npz")
+    ap.add_argument("--pairs", nargs="+", default=["runs/scale/pairs"], help="label: the folder to write; "
+                    "fit: every folder to read")
+    ap.add_argument("--out", default=None, help="refs: the .npz; label: the pairs folder; fit: the students folder")
+    ap.add_argument("--captured", type=int, default=700, help="refs: captured jobs")
+    ap.add_argument("--motions", type=int, default=250, help="refs: generated motions (2 jobs each)")
+    ap.add_argument("--start", type=int, default=0, help="label: the first reference (machines can share the "
+                    "work: one takes 0..N-1, another N..)")
+    ap.add_argument("--limit", type=int, default=0, help="label: at most this many references (0: all)")
+    ap.add_argument("--minutes", type=float, default=0.0, help="label: stop after this long (0: never)")
+    ap.add_argument("--label-machines", nargs="+", default=[], help="fit: where each --pairs folder was "
+                    "labelled, for the table")
+    ap.add_argument("--dagger-refs", type=int, default=120, help="fit: references of the DAgger round (0: none)")
+    ap.add_argument("--labeller-row", action=argparse.BooleanOptionalAction, default=True)
+    ap.add_argument("--captured-test", type=int, default=10)
+    ap.add_argument("--max-seconds", type=float, default=5.0)
+    ap.add_argument("--prompts", type=int, default=12)
+    ap.add_argument("--workers", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--results", default="results/learn_at_scale")
+    args = parse_args(ap, argv)
+    args.out = args.out or {"refs": args.refs, "label": args.pairs[0], "fit": "runs/scale/students"}[args.stage]
+    args.label_machines = (args.label_machines + ["this machine"] * len(args.pairs))[: len(args.pairs)]
+    {"refs": _refs, "label": _label, "fit": _fit}[args.stage](args)
+
+
+if __name__ == "__main__":
+    main()
