@@ -5,10 +5,10 @@ Three stages, so that the costly one can run on a bigger machine (issue 63, item
 
     python -m experiments.learn_at_scale refs  [--data data_build/all] [--captured 700] [--motions 250]
                                                [--out runs/scale/refs.npz]
-    python -m experiments.learn_at_scale label [--refs runs/scale/refs.npz] [--out runs/scale/pairs]
-                                               [--workers 0] [--minutes 0]
-    python -m experiments.learn_at_scale fit   [--refs ...] [--pairs ...] [--out runs/scale/students]
-                                               [--dagger-refs 120] [--captured-test 10]
+    python -m experiments.learn_at_scale label [--refs runs/scale/refs.npz] [--pairs runs/scale/pairs]
+                                               [--start 0] [--limit 0] [--workers 0] [--minutes 0]
+    python -m experiments.learn_at_scale fit   [--refs ...] [--pairs FOLDER ...] [--label-machines TEXT ...]
+                                               [--out runs/scale/students] [--dagger-refs 120]
 
 - ``refs``: the training references, as experiments/teacher_data.py makes its jobs (physmotion/imitator/
   teacher.py: segments of at most 4 s, each from a plain and a pushed start): the first ``--captured`` jobs of
@@ -21,8 +21,10 @@ Three stages, so that the costly one can run on a bigger machine (issue 63, item
   chunks of at most 5,000 (``pairs_NNN.npz``, atomically), with ``index.json`` (per reference: steps
   survived, pairs; the wall time and workers). Needs numpy, scipy and MuJoCo only.
 - ``fit``: BC students on growing prefixes of the labelled references (1/8, 1/4, 1/2, all: a curve of success
-  against labelled pairs, one StudentConfig), then one DAgger round from the all-data student on the first
-  ``--dagger-refs`` references (the student drives them, its visited states are labelled, refit on all).
+  against labelled pairs), each fitted twice, keeping the last step's weights (StudentConfig's default) or
+  the step with the least validation error; then one DAgger round from the all-data student kept on
+  validation, on the first ``--dagger-refs`` references (the student drives them, its visited states are
+  labelled, refit on all).
   Every student, the bare tracker and the labeller as a controller are evaluated with no outside hand on
   experiments/learn_from_search.py's held-out set and columns.
 """
@@ -32,6 +34,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from dataclasses import replace
 from functools import partial
 from pathlib import Path
 
@@ -157,19 +160,22 @@ def _fit(args: argparse.Namespace) -> None:
     x, y, ref = load_pairs(args.pairs)
     indexes = [json.loads((Path(p) / "index.json").read_text()) for p in args.pairs]
     order = sorted({int(d["ref"]) for ix in indexes for d in ix["done"].values()})  # labelled, in labelling order
-    cfg, out = StudentConfig(seed=args.seed), Path(args.out)
+    cfg, out = StudentConfig(steps=args.fit_steps, seed=args.seed), Path(args.out)
+    chosen = replace(cfg, select_on_validation=True)
     folders, fits = {}, {}
     for share in (8, 4, 2, 1):
         used = order[: max(1, len(order) // share)]
         keep = np.isin(ref, used)
-        weights, stats = fit_student(x[keep], y[keep], ref[keep], cfg)
-        name = f"BC, {len(used)} references ({stats['pairs']} pairs)"
-        recs = [refs[i] for i in used]
-        folders[name] = str(save_student(out / f"bc_{len(used)}", weights, student_settings(cfg),
-                                         card(cfg, "BC", recs, stats)))  # fmt: skip
-        fits[name] = stats
-        print(f"{name}: validation MSE {stats['val_mse']:.3f} (0 predicted: {stats['val_mse_zero']:.3f})", flush=True)
-    if args.dagger_refs:
+        for label, conf in (("last step", cfg), ("least validation error", chosen)):
+            weights, stats = fit_student(x[keep], y[keep], ref[keep], conf)
+            name = f"BC, {len(used)} references ({stats['pairs']} pairs), {label}"
+            sub = f"bc_{len(used)}" + ("_selected" if conf.select_on_validation else "")
+            folders[name] = str(save_student(out / sub, weights, student_settings(conf),
+                                             card(conf, "BC", [refs[i] for i in used], stats)))  # fmt: skip
+            fits[name] = stats
+            print(f"{name}: validation MSE {stats['val_mse']:.3f} (0 predicted: {stats['val_mse_zero']:.3f}), "
+                  f"step {stats['steps_kept']}", flush=True)  # fmt: skip
+    if args.dagger_refs:  # one round from the all-data student kept on validation, refit the same way
         used = order[: args.dagger_refs]
         step = partial(dagger_episode, labeller=Labeller(), action_scale=cfg.action_scale)
         got = map_in_workers(step, [(refs[i], folders[name]) for i in used], args.workers)
@@ -177,13 +183,14 @@ def _fit(args: argparse.Namespace) -> None:
         x2 = np.concatenate([x] + [a for a, _, _, _ in got])
         y2 = np.concatenate([y] + [b for _, b, _, _ in got])
         r2 = np.concatenate([ref] + [np.full(len(a), i) for i, (a, _, _, _) in zip(used, got)])
-        weights, stats = fit_student(x2, y2, r2, cfg)
+        weights, stats = fit_student(x2, y2, r2, chosen)
         stats["survived_before"] = round(float(survived), 3)
-        name = f"DAgger 1 on {len(used)} references ({stats['pairs']} pairs)"
-        folders[name] = str(save_student(out / "dagger1", weights, student_settings(cfg),
-                                         card(cfg, "DAgger 1", [refs[i] for i in order], stats)))  # fmt: skip
+        name = f"DAgger 1 on {len(used)} references ({stats['pairs']} pairs), least validation error"
+        folders[name] = str(save_student(out / "dagger1", weights, student_settings(chosen),
+                                         card(chosen, "DAgger 1", [refs[i] for i in order], stats)))  # fmt: skip
         fits[name] = stats
-        print(f"{name}: the BC student survived {survived:.2f} of those steps", flush=True)
+        print(f"{name}: the BC student survived {survived:.2f} of those steps; validation MSE "
+              f"{stats['val_mse']:.3f}", flush=True)  # fmt: skip
 
     test, motions, prompts = heldout_motions(args.data, args.captured_test, args.max_seconds, args.prompts, args.seed)
     rows: dict[str, dict] = {"tracker, hand off": {"kind": "tracker", "hand": False}}
@@ -213,6 +220,7 @@ def _fit(args: argparse.Namespace) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     from experiments._results import parse_args
+    from physmotion.imitator.student import StudentConfig
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("stage", choices=["refs", "label", "fit"])
@@ -230,6 +238,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--label-machines", nargs="+", default=[], help="fit: where each --pairs folder was "
                     "labelled, for the table")
     ap.add_argument("--dagger-refs", type=int, default=120, help="fit: references of the DAgger round (0: none)")
+    ap.add_argument("--fit-steps", type=int, default=StudentConfig().steps, help="fit: gradient steps per fit")
     ap.add_argument("--labeller-row", action=argparse.BooleanOptionalAction, default=True)
     ap.add_argument("--captured-test", type=int, default=10)
     ap.add_argument("--max-seconds", type=float, default=5.0)

@@ -50,6 +50,10 @@ class StudentConfig:
     learning_rate: float = 1e-3
     weight_decay: float = 1e-4
     validation: float = 0.1  # share of the records (whole records, not steps) held out for the validation loss
+    # Keep the weights of the step with the least validation loss (checked every 100 steps), not the last:
+    # small sets overfit until held-out error is above predicting 0 (docs/decisions/projection.md,
+    # "learning from the search at scale").
+    select_on_validation: bool = False
     seed: int = 0
 
 
@@ -73,7 +77,7 @@ def fit_student(x: np.ndarray, y: np.ndarray, groups: np.ndarray, config: Studen
     """Fit the student on observations x (M, 599) -> actions y (M, 63); groups (M,) names each pair's
     record, and whole records are held out for validation. Returns the network's weights (PolicyNetwork's
     arrays) and {"train_mse", "val_mse", and of predicting 0 (the bare tracker) "train_mse_zero",
-    "val_mse_zero"; "pairs"}."""
+    "val_mse_zero"; "pairs"; "steps_kept", the step whose weights were kept}."""
     import torch
 
     if len(x) != len(y) or x.shape[1:] != (OBS_DIM,) or y.shape[1:] != (NUM_ACTIONS,):
@@ -98,19 +102,30 @@ def fit_student(x: np.ndarray, y: np.ndarray, groups: np.ndarray, config: Studen
     yt = torch.from_numpy(y)
     train_idx = np.flatnonzero(~val)
     gen = torch.Generator().manual_seed(config.seed)
-    for _ in range(config.steps):
+    select = config.select_on_validation and val.any()
+    val_idx = torch.from_numpy(np.flatnonzero(val))
+    best, best_step = (float("inf"), None), 0
+    for step in range(1, config.steps + 1):
         b = torch.from_numpy(train_idx)[torch.randint(len(train_idx), (config.batch,), generator=gen)]
         loss = torch.mean((net(xt[b]) - yt[b]) ** 2)
         opt.zero_grad()
         loss.backward()
         opt.step()
         sched.step()
+        if select and (step % 100 == 0 or step == config.steps):
+            with torch.no_grad():
+                v = float(torch.mean((net(xt[val_idx]) - yt[val_idx]) ** 2))
+            if v < best[0]:
+                best, best_step = (v, {k: t.clone() for k, t in net.state_dict().items()}), step
+    if select:
+        net.load_state_dict(best[1])
     with torch.no_grad():
         pred = net(xt)
         err = ((pred - yt) ** 2).mean(dim=1).numpy()
     stats = {"pairs": len(x), "train_mse": float(err[~val].mean()), "train_mse_zero": float((y[~val] ** 2).mean()),
              "val_mse": float(err[val].mean()) if val.any() else float("nan"),
-             "val_mse_zero": float((y[val] ** 2).mean()) if val.any() else float("nan")}  # fmt: skip
+             "val_mse_zero": float((y[val] ** 2).mean()) if val.any() else float("nan"),
+             "steps_kept": best_step if select else config.steps}  # fmt: skip
     linears = [m for m in net if isinstance(m, torch.nn.Linear)]
     weights = {"obs_mean": mean, "obs_std": std}
     for i, lin in enumerate(linears):

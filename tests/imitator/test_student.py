@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -61,6 +63,21 @@ def test_the_fit_learns_the_labels_and_saves_a_policy_p_loads(fitted, records, t
     model, ref, pconf = _prepared(records[0]["joints"], float(records[0]["fps"]))
     ctrl = loaded.controller(model)
     assert ctrl.caps() == (0.0, 0.0, 0.0)
+
+
+def test_selecting_on_validation_keeps_the_least_held_out_error(fitted) -> None:
+    config, _, last, (x, y, g) = fitted
+    weights, kept = fit_student(x, y, g, replace(config, select_on_validation=True))
+    assert last["steps_kept"] == config.steps and 0 < kept["steps_kept"] <= config.steps
+    assert kept["steps_kept"] % 100 == 0 or kept["steps_kept"] == config.steps  # checked every 100 steps
+    assert kept["val_mse"] <= last["val_mse"] + 1e-6  # the same run's last step is among the candidates
+    # the returned weights are the kept step's, not the last: their held-out error is the one reported
+    names = np.unique(g)  # fit_student's split: whole records drawn with the config's seed
+    held = np.random.default_rng(config.seed).choice(names, size=max(1, round(config.validation * len(names))),
+                                                     replace=False)  # fmt: skip
+    val = np.isin(g, held)
+    err = ((student_policy(weights, student_settings(config)).network(x) - y) ** 2).mean(axis=1)
+    assert err[val].mean() == pytest.approx(kept["val_mse"], rel=1e-4)
 
 
 def test_carry_ends_at_the_search_s_fall(run_clip: ClipSource) -> None:
