@@ -25,8 +25,9 @@ Three stages, so that the costly one can run on a bigger machine (issue 63, item
   the step with the least validation error; then one DAgger round from the all-data student kept on
   validation, on the first ``--dagger-refs`` references (the student drives them, its visited states are
   labelled, refit on all).
-  Every student, the bare tracker and the labeller as a controller are evaluated with no outside hand on
-  experiments/learn_from_search.py's held-out set and columns.
+  Every student, the bare tracker, the labeller as a controller and small searches with the last student
+  proposing (``--amortized``) are evaluated with no outside hand on experiments/learn_from_search.py's
+  held-out set and columns.
 """
 
 from __future__ import annotations
@@ -144,7 +145,7 @@ def _where(indexes: list[dict], machines: list[str]) -> str:
 
 def _fit(args: argparse.Namespace) -> None:
     from experiments._results import markdown_table, run_meta, write_results
-    from experiments.learn_from_search import evaluate_rows, heldout_motions
+    from experiments.learn_from_search import SMALL_EFFORTS, evaluate_rows, heldout_motions
     from physmotion.imitator.student import (
         Labeller,
         StudentConfig,
@@ -197,6 +198,11 @@ def _fit(args: argparse.Namespace) -> None:
     if args.labeller_row:
         rows["MPPI labeller as a controller (32 x 1, lookahead 15)"] = {"kind": "expert"}
     rows |= {f"{name} student": {"kind": "policy", "folder": folder} for name, folder in folders.items()}
+    last = list(folders)[-1]
+    for effort_name in args.amortized:  # the last student as the proposal of a small search
+        conf = replace(SMALL_EFFORTS[effort_name], seed=args.seed)
+        rows[f"amortized: {last.split(' (')[0]} + search {effort_name}"] = {"kind": "search", "config": conf,
+                                                                          "proposal": folders[last]}  # fmt: skip
     header, table, json_rows = evaluate_rows(rows, motions, args.workers)
     labelled = [refs[i] for i in order]
     seconds = sum(len(r["joints"]) / r["fps"] for r in labelled)
@@ -239,6 +245,9 @@ def main(argv: list[str] | None = None) -> None:
                     "labelled, for the table")
     ap.add_argument("--dagger-refs", type=int, default=120, help="fit: references of the DAgger round (0: none)")
     ap.add_argument("--fit-steps", type=int, default=StudentConfig().steps, help="fit: gradient steps per fit")
+    ap.add_argument("--amortized", nargs="*", default=["8x1, lookahead 6", "16x2, lookahead 10"],
+                    help="fit: small search efforts (experiments.learn_from_search.SMALL_EFFORTS) with the last "
+                         "student proposing, as rows")
     ap.add_argument("--labeller-row", action=argparse.BooleanOptionalAction, default=True)
     ap.add_argument("--captured-test", type=int, default=10)
     ap.add_argument("--max-seconds", type=float, default=5.0)
