@@ -58,3 +58,28 @@ def test_callers_on_several_threads_share_the_pool() -> None:
         results = list(threads.map(lambda k: map_in_workers(_square_and_pid, [k, k + 1, k + 2], 2), range(8)))
     assert [[v for v, _ in r] for r in results] == [[k * k, (k + 1) ** 2, (k + 2) ** 2] for k in range(8)]
     assert len({pid for r in results for _, pid in r}) <= 2  # one pool of two workers served them all
+
+
+def _sleep_and_mark(job: tuple[str, int]) -> int:
+    import time
+    from pathlib import Path
+
+    folder, x = job
+    time.sleep(0.2)
+    (Path(folder) / f"{x}.done").touch()
+    return x
+
+
+def test_stopping_early_cancels_the_items_not_started(tmp_path) -> None:
+    import time
+
+    from physmotion.physics.workers import imap_in_workers
+
+    items = [(str(tmp_path), x) for x in range(40)]
+    for _ in imap_in_workers(_sleep_and_mark, items, workers=2):
+        break  # a caller past its deadline
+    time.sleep(1.0)  # what had started finishes; nothing else should
+    done = len(list(tmp_path.glob("*.done")))
+    assert 1 <= done <= 6, done  # 40 would mean every queued item ran anyway
+    # the pool still works
+    assert [v for v, _ in map_in_workers(_square_and_pid, [5, 6], workers=2)] == [25, 36]
