@@ -15,11 +15,13 @@ Three stages, so that the costly one can run on a bigger machine (issue 63, item
   the built dataset's train split (mirrors included) and every job of ``--motions`` plain samples (4 s,
   default model) of Morph's synthetic prompts (train captions, never an evaluation prompt), the two kinds
   interleaved so that any prefix holds both.
-- ``label``: the MPPI labeller as the :class:`~physmotion.imitator.student.Expert` drives each reference in
-  that order (:func:`~physmotion.imitator.student.expert_episode`) in worker processes, until every reference
-  is done or ``--minutes`` have passed; its labelled (observation, offset) pairs are written as they come, in
-  chunks of at most 5,000 (``pairs_NNN.npz``, atomically), with ``index.json`` (per reference: steps
-  survived, pairs; the wall time and workers). Needs numpy, scipy and MuJoCo only.
+- ``label``: the MPPI labeller as the :class:`~physmotion.imitator.student.Expert` drives each reference of
+  ``--start`` .. ``--start + --limit`` in that order (:func:`~physmotion.imitator.student.expert_episode`) in
+  worker processes, until every one is done or ``--minutes`` have passed; its labelled (observation, offset)
+  pairs are written in chunks of about 5,000 (``pairs_NNN.npz``, atomically), with ``index.json`` (per
+  reference written: steps survived, pairs; the wall time and workers). A re-run into the same folder
+  skips the references written (resumable); machines can share the work by ranges. Needs numpy, scipy and
+  MuJoCo only.
 - ``fit``: BC students on growing prefixes of the labelled references (1/8, 1/4, 1/2, all: a curve of success
   against labelled pairs), each fitted twice, keeping the last step's weights (StudentConfig's default) or
   the step with the least validation error; then one DAgger round from the all-data student kept on
@@ -92,42 +94,43 @@ def _label(args: argparse.Namespace) -> None:
     from physmotion.physics.workers import imap_in_workers, worker_count
 
     everything = load_refs(args.refs)
-    refs = everything[args.start : args.start + args.limit if args.limit else None]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    index_file = out / "index.json"
+    index: dict = json.loads(index_file.read_text()) if index_file.is_file() else {"wall_s": 0.0, "done": {}}
+    chunks = len(list(out.glob("pairs_*.npz")))  # a re-run goes on after what is written
+    span = range(args.start, min(len(everything), args.start + args.limit) if args.limit else len(everything))
+    todo = [i for i in span if everything[i]["name"] not in index["done"]]
     fn = partial(expert_episode, labeller=Labeller(), action_scale=StudentConfig().action_scale)
-    workers = worker_count(args.workers, len(refs))
-    t0, deadline = time.time(), time.time() + 60 * args.minutes if args.minutes else float("inf")
-    index: dict = {"references": len(refs), "workers": workers, "done": {}}
-    buf: list[tuple[int, np.ndarray, np.ndarray]] = []
-    chunks = 0
+    workers = worker_count(args.workers, len(todo))
+    index["workers"] = workers
+    t0, wall0 = time.time(), float(index["wall_s"])
+    deadline = t0 + 60 * args.minutes if args.minutes else float("inf")
+    buf: list[tuple[int, np.ndarray, np.ndarray, dict]] = []
 
-    def flush() -> None:
+    def flush() -> None:  # a reference counts as done once its pairs are written
         nonlocal buf, chunks
-        if not buf:
-            return
-        x = np.concatenate([b[1] for b in buf])
-        y = np.concatenate([b[2] for b in buf])
-        ref = np.concatenate([np.full(len(b[1]), b[0]) for b in buf])
-        write_atomic(out / f"pairs_{chunks:03d}.npz", lambda f: np.savez_compressed(f, x=x, y=y, ref=ref))
-        chunks, buf = chunks + 1, []
+        if buf:
+            x = np.concatenate([b[1] for b in buf])
+            y = np.concatenate([b[2] for b in buf])
+            ref = np.concatenate([np.full(len(b[1]), b[0]) for b in buf])
+            write_atomic(out / f"pairs_{chunks:03d}.npz", lambda f: np.savez_compressed(f, x=x, y=y, ref=ref))
+            index["done"] |= {everything[b[0]]["name"]: b[3] for b in buf}
+            chunks, buf = chunks + 1, []
+        index["wall_s"] = round(wall0 + time.time() - t0, 1)
+        write_atomic(index_file, lambda f: f.write(json.dumps(index)), "w")
 
-    for n, (i, (x, y, survived, steps)) in enumerate(imap_in_workers(fn, refs, workers), 1):
-        buf.append((args.start + i, x, y))
-        index["done"][refs[i]["name"]] = {"ref": args.start + i, "survived": survived, "steps": steps,
-                                          "pairs": len(x)}  # fmt: skip
+    print(f"{len(todo)} of {len(span)} references to label ({len(span) - len(todo)} done before)", flush=True)
+    for n, (j, (x, y, survived, steps)) in enumerate(imap_in_workers(fn, [everything[i] for i in todo], workers), 1):
+        buf.append((todo[j], x, y, {"ref": todo[j], "survived": survived, "steps": steps, "pairs": len(x)}))
         if sum(len(b[1]) for b in buf) >= CHUNK:
             flush()
-        index["wall_s"] = round(time.time() - t0, 1)
-        write_atomic(out / "index.json", lambda f: f.write(json.dumps(index)), "w")
-        if n % 10 == 0 or n == len(refs):
-            pairs = sum(d["pairs"] for d in index["done"].values())
-            print(f"{n}/{len(refs)} references, {pairs} pairs, {time.time() - t0:.0f} s", flush=True)
+        if n % 10 == 0 or n == len(todo):
+            print(f"{n}/{len(todo)} references, {time.time() - t0:.0f} s", flush=True)
         if time.time() > deadline:
-            print(f"deadline: {n} of {len(refs)} references labelled", flush=True)
+            print(f"deadline: {n} of {len(todo)} references labelled", flush=True)
             break
     flush()
-    write_atomic(out / "index.json", lambda f: f.write(json.dumps(index)), "w")
 
 
 def load_pairs(folders: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

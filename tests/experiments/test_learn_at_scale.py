@@ -1,5 +1,6 @@
 """experiments/learn_at_scale.py: the references interleave both kinds and share segments; labelling writes
-chunks a fit can read, and a second machine's share of the work keeps its global reference numbers."""
+chunks a fit can read, a second machine's share of the work keeps its global reference numbers, and a re-run
+goes on where the last stopped."""
 
 from __future__ import annotations
 
@@ -35,8 +36,14 @@ def test_references_then_labels_on_two_machines(small_built_dir: Path, tmp_path:
               "--workers", "1", "--allow-dirty"])  # fmt: skip
     index = json.loads((tmp_path / "b" / "index.json").read_text())
     assert [d["ref"] for d in index["done"].values()] == [3] and index["workers"] == 1
+    # resumable: a re-run over a range partly written labels only what is new (reference 2), in a new chunk
+    main(["label", "--refs", str(refs), "--pairs", str(tmp_path / "b"), "--start", "2", "--limit", "2",
+          "--workers", "1", "--minutes", "0.01", "--allow-dirty"])  # fmt: skip
+    index = json.loads((tmp_path / "b" / "index.json").read_text())
+    assert sorted(d["ref"] for d in index["done"].values()) == [2, 3]
+    assert len(list((tmp_path / "b").glob("pairs_*.npz"))) == 2
     x, y, ref = load_pairs([str(tmp_path / "a"), str(tmp_path / "b")])
     assert x.shape[1:] == (OBS_DIM,) and y.shape[1:] == (NUM_ACTIONS,) and len(x) == len(y) == len(ref)
-    assert set(ref.tolist()) == {0, 3} and np.all(np.abs(y) <= 1.0) and np.isfinite(x).all()
+    assert set(ref.tolist()) == {0, 2, 3} and np.all(np.abs(y) <= 1.0) and np.isfinite(x).all()
     done = json.loads((tmp_path / "a" / "index.json").read_text())["done"]
     assert sum(d["pairs"] for d in done.values()) == int((ref == 0).sum()) > 0
