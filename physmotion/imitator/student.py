@@ -50,9 +50,9 @@ class StudentConfig:
     learning_rate: float = 1e-3
     weight_decay: float = 1e-4
     validation: float = 0.1  # share of the records (whole records, not steps) held out for the validation loss
-    # Keep the weights of the step with the least validation loss (checked every 100 steps), not the last:
-    # small sets overfit until held-out error is above predicting 0 (docs/decisions/projection.md,
-    # "learning from the search at scale").
+    # Start from the bare tracker (a zero last layer) and keep the weights of the step with the least
+    # validation loss (step 0 included, checked every 25), not the last: small sets overfit until held-out
+    # error is above predicting 0 (docs/decisions/projection.md, "learning from the search at scale").
     select_on_validation: bool = False
     seed: int = 0
 
@@ -96,23 +96,27 @@ def fit_student(x: np.ndarray, y: np.ndarray, groups: np.ndarray, config: Studen
         if i < len(dims) - 2:
             layers.append(torch.nn.ELU())
     net = torch.nn.Sequential(*layers)
+    select = config.select_on_validation and val.any()
+    if select:  # step 0 is the bare tracker: a fit kept on validation is never worse than it on held-out data
+        torch.nn.init.zeros_(layers[-1].weight)
+        torch.nn.init.zeros_(layers[-1].bias)
     opt = torch.optim.AdamW(net.parameters(), lr=config.learning_rate, weight_decay=config.weight_decay)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, config.steps)
     xt = torch.from_numpy((x - mean) / std)
     yt = torch.from_numpy(y)
     train_idx = np.flatnonzero(~val)
     gen = torch.Generator().manual_seed(config.seed)
-    select = config.select_on_validation and val.any()
     val_idx = torch.from_numpy(np.flatnonzero(val))
     best, best_step = (float("inf"), None), 0
-    for step in range(1, config.steps + 1):
-        b = torch.from_numpy(train_idx)[torch.randint(len(train_idx), (config.batch,), generator=gen)]
-        loss = torch.mean((net(xt[b]) - yt[b]) ** 2)
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-        sched.step()
-        if select and (step % 100 == 0 or step == config.steps):
+    for step in range(config.steps + 1):
+        if step:
+            b = torch.from_numpy(train_idx)[torch.randint(len(train_idx), (config.batch,), generator=gen)]
+            loss = torch.mean((net(xt[b]) - yt[b]) ** 2)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+        if select and (step % 25 == 0 or step == config.steps):
             with torch.no_grad():
                 v = float(torch.mean((net(xt[val_idx]) - yt[val_idx]) ** 2))
             if v < best[0]:

@@ -68,9 +68,10 @@ def test_the_fit_learns_the_labels_and_saves_a_policy_p_loads(fitted, records, t
 def test_selecting_on_validation_keeps_the_least_held_out_error(fitted) -> None:
     config, _, last, (x, y, g) = fitted
     weights, kept = fit_student(x, y, g, replace(config, select_on_validation=True))
-    assert last["steps_kept"] == config.steps and 0 < kept["steps_kept"] <= config.steps
-    assert kept["steps_kept"] % 100 == 0 or kept["steps_kept"] == config.steps  # checked every 100 steps
-    assert kept["val_mse"] <= last["val_mse"] + 1e-6  # the same run's last step is among the candidates
+    assert last["steps_kept"] == config.steps and 0 <= kept["steps_kept"] <= config.steps
+    assert kept["steps_kept"] % 25 == 0 or kept["steps_kept"] == config.steps  # checked every 25 steps
+    # step 0 (a zero last layer: the bare tracker) is among the candidates: never worse than predicting 0
+    assert kept["val_mse"] <= kept["val_mse_zero"] + 1e-6
     # the returned weights are the kept step's, not the last: their held-out error is the one reported
     names = np.unique(g)  # fit_student's split: whole records drawn with the config's seed
     held = np.random.default_rng(config.seed).choice(names, size=max(1, round(config.validation * len(names))),
