@@ -342,6 +342,32 @@ def learn_quotes() -> list[str]:
     return out
 
 
+SCALE_ROWS = {  # the rows of results/learn_at_scale.json the docs quote, by the words they use
+    "the bare tracker with its hand off": "tracker, hand off",
+    "BC on all of them, last step": "BC, {refs} references ({pairs} pairs), last step student",
+    "BC on all of them, kept on validation": "BC, {refs} references ({pairs} pairs), least validation error student",
+    "a DAgger round": "DAgger 1 on 120 references ({dagger} pairs), least validation error student",
+    "a 16 x 2 search with it proposing": "amortized: DAgger 1 on 120 references + search 16x2, lookahead 10",
+}
+
+
+def learn_at_scale_quotes() -> list[str]:
+    """Learning from the search at scale (results/learn_at_scale.json): its size, the all-data fit's held-out
+    error against predicting 0, and per quoted row what learn_quotes gives."""
+    got = _load("learn_at_scale.json")
+    rows = {r["row"]: r for r in got["rows"]}
+    fits = list(got["fits"].values())
+    last_bc, dagger = fits[-2], fits[-1]
+    out = [f"{got['references']} references, {got['pairs']} labelled pairs",
+           f"held-out error {last_bc['val_mse']:.3f} against {last_bc['val_mse_zero']:.3f} for predicting nothing"]
+    for words, name in SCALE_ROWS.items():
+        name = name.format(refs=got["references"], pairs=got["pairs"], dagger=dagger["pairs"])
+        c, g = rows[name]["captured"], rows[name]["generated"]
+        out.append(f"{words}: {100 * c['completed']:.0f} % / {100 * g['completed']:.0f} % (survived "
+                   f"{c['survived']:.2f} / {g['survived']:.2f}, CPU {c['cpu_s_per_s']:.2f} / {g['cpu_s_per_s']:.2f} s per s)")
+    return out
+
+
 def morph_search_quotes() -> list[str]:
     """A Morph round refined by the search (issue 61, item 8): the refined synthetic motions, the models on
     the test split and their plain samples of jump prompts, tracker-refined then search-refined."""
@@ -402,6 +428,8 @@ QUOTES = {  # which doc quotes which result file
     ("results", "learn"): learn_quotes,
     ("results", "morph search"): morph_search_quotes,
     ("limitations", "learn"): learn_quotes,
+    ("results", "learn at scale"): learn_at_scale_quotes,
+    ("limitations", "learn at scale"): learn_at_scale_quotes,
 }
 
 
@@ -414,7 +442,7 @@ def _section(text: str, source: str) -> str:
              "new prompts": "new_prompts_default", "new prompts base": "new_prompts_base",
              "new prompts fine": "new_prompts_fine",
              "biomodiffuse": "results/biomodiffuse", "refine": "results/refine", "imitator": "results/imitator_",
-             "imitator captured": "results/imitator_captured", "learn": "learn_from_search",
+             "imitator captured": "results/imitator_captured", "learn": "learn_from_search", "learn at scale": "learn_at_scale",
              "morph search": "morph_search.*"}
     marker = files[source]
     return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
