@@ -59,9 +59,10 @@ def _refs(args: argparse.Namespace) -> None:
     jobs = [j for pair in zip(captured, generated) for j in pair]
     jobs += captured[len(generated) :] + generated[len(captured) :]
     segments: dict[tuple[str, int], int] = {}  # a plain and a pushed start share their segment's joints
+    first: dict[tuple[str, int], object] = {}
     for j in jobs:
         segments.setdefault((j.source, j.start), len(segments))
-    first = {key: next(j for j in jobs if (j.source, j.start) == key) for key in segments}
+        first.setdefault((j.source, j.start), j)
     lengths = np.array([len(first[k].joints) for k in segments])
     arrays = {
         "joints": np.concatenate([first[k].joints for k in segments]).astype(np.float32),  # (sum T, 22, 3)
