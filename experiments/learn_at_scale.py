@@ -155,12 +155,11 @@ def _fit(args: argparse.Namespace) -> None:
         StudentConfig,
         card,
         dagger_episode,
+        dagger_round,
         fit_student,
         save_student,
         student_settings,
     )
-    from physmotion.physics.workers import map_in_workers
-
     refs = load_refs(args.refs)
     x, y, ref = load_pairs(args.pairs)
     indexes = [json.loads((Path(p) / "index.json").read_text()) for p in args.pairs]
@@ -178,16 +177,14 @@ def _fit(args: argparse.Namespace) -> None:
             folders[name] = str(save_student(out / sub, weights, student_settings(conf),
                                              card(conf, "BC", [refs[i] for i in used], stats)))  # fmt: skip
             fits[name] = stats
+            start = name  # DAgger starts from the last: all the data, kept on validation
             print(f"{name}: validation MSE {stats['val_mse']:.3f} (0 predicted: {stats['val_mse_zero']:.3f}), "
                   f"step {stats['steps_kept']}", flush=True)  # fmt: skip
-    if args.dagger_refs:  # one round from the all-data student kept on validation, refit the same way
+    if args.dagger_refs:  # one round from ``start``, refit the same way
         used = order[: args.dagger_refs]
         step = partial(dagger_episode, labeller=Labeller(), action_scale=cfg.action_scale)
-        got = map_in_workers(step, [(refs[i], folders[name]) for i in used], args.workers)
-        survived = sum(s for _, _, s, _ in got) / max(sum(n for _, _, _, n in got), 1)
-        x2 = np.concatenate([x] + [a for a, _, _, _ in got])
-        y2 = np.concatenate([y] + [b for _, b, _, _ in got])
-        r2 = np.concatenate([ref] + [np.full(len(a), i) for i, (a, _, _, _) in zip(used, got)])
+        x2, y2, r2, survived = dagger_round(step, [refs[i] for i in used], used, folders[start], (x, y, ref),
+                                            args.workers)  # fmt: skip
         weights, stats = fit_student(x2, y2, r2, chosen)
         stats["survived_before"] = round(float(survived), 3)
         name = f"DAgger 1 on {len(used)} references ({stats['pairs']} pairs), least validation error"
@@ -220,7 +217,7 @@ def _fit(args: argparse.Namespace) -> None:
             f"training, as in results/learn_from_search.md.\n\n{markdown_table(header, table)}\n")  # fmt: skip
     labelling = [{"folder": p, "machine": m, "wall_s": ix["wall_s"], "workers": ix["workers"],
                   "references": len(ix["done"])} for p, m, ix in zip(args.pairs, args.label_machines, indexes)]
-    meta = run_meta(__file__, None, args.tree, None, labelling=labelling)
+    meta = run_meta(__file__, args.argv, args.tree, None, labelling=labelling)
     payload = {"meta": meta, "rows": json_rows, "fits": fits, "references": len(order), "pairs": int(len(x)),
                "licence_tags": sorted({r["licence_tag"] for r in labelled if r["licence_tag"]}),
                "prompts": prompts, "test_clips": [c.name for c in test]}  # fmt: skip
@@ -260,6 +257,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--results", default="results/learn_at_scale")
     args = parse_args(ap, argv)
+    args.argv = argv
     args.out = args.out or {"refs": args.refs, "label": args.pairs[0], "fit": "runs/scale/students"}[args.stage]
     args.label_machines = (args.label_machines + ["this machine"] * len(args.pairs))[: len(args.pairs)]
     {"refs": _refs, "label": _label, "fit": _fit}[args.stage](args)

@@ -359,11 +359,8 @@ def train_student(records: Sequence[dict], out: str | Path, config: StudentConfi
     for r in range(1, dagger_rounds + 1):
         step = partial(dagger_episode, labeller=replace(lab, seed=lab.seed if lab.temperature is not None else
                                                      cfg.seed * 1000 + r), action_scale=cfg.action_scale)  # fmt: skip
-        got = map_in_workers(step, [(rec, folders[list(folders)[-1]]) for rec in records], workers)
-        x = np.concatenate([x] + [a for a, _, _, _ in got])
-        y = np.concatenate([y] + [b for _, b, _, _ in got])
-        g = np.concatenate([g] + [np.full(len(a), i) for i, (a, _, _, _) in enumerate(got)])
-        survived = sum(s for _, _, s, _ in got) / max(sum(n for _, _, _, n in got), 1)
+        x, y, g, survived = dagger_round(step, records, range(len(records)), folders[list(folders)[-1]],
+                                         (x, y, g), workers)  # fmt: skip
         weights, stats = fit_student(x, y, g, cfg)
         stats["survived_before"] = round(float(survived), 3)
         name = f"DAgger {r}"
@@ -372,6 +369,22 @@ def train_student(records: Sequence[dict], out: str | Path, config: StudentConfi
         log(f"{name}: the student before it survived {survived:.2f} of the training steps; {len(x)} pairs, "
             f"validation MSE {stats['val_mse']:.3f}")  # fmt: skip
     return folders
+
+
+def dagger_round(step, records: Sequence[dict], groups: Sequence[int], folder: str,
+                 pairs: tuple[np.ndarray, np.ndarray, np.ndarray],
+                 workers: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:  # fmt: skip
+    """One DAgger round: the student in ``folder`` drives each of ``records`` through ``step`` (a partial of
+    :func:`dagger_episode`), and the labelled pairs are appended to ``pairs`` (observations, labels, group),
+    record i's under ``groups[i]``. Returns the grown pairs and the share of control steps it survived."""
+    from physmotion.physics.workers import map_in_workers
+
+    got = map_in_workers(step, [(rec, folder) for rec in records], workers)
+    x = np.concatenate([pairs[0]] + [a for a, _, _, _ in got])
+    y = np.concatenate([pairs[1]] + [b for _, b, _, _ in got])
+    g = np.concatenate([pairs[2]] + [np.full(len(a), i) for i, (a, _, _, _) in zip(groups, got)])
+    survived = sum(s for _, _, s, _ in got) / max(sum(n for _, _, _, n in got), 1)
+    return x, y, g, float(survived)
 
 
 def expert_episode(record: dict, labeller: Labeller, action_scale: float) -> tuple[np.ndarray, np.ndarray, int, int]:
