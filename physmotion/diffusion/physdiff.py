@@ -26,6 +26,7 @@ from physmotion.diffusion.model import MotionDiffusion
 from physmotion.errors import PhysmotionError
 from physmotion.features.biomech import FEATURE_DIM_BIOMECH, extract_features_329
 from physmotion.features.humanml3d import FEATURE_DIM, extract_features, recover_from_ric
+from physmotion.metrics.dynamics import largest_step
 from physmotion.physics.projection import ProjectionConfig, SimRecord, project
 
 
@@ -72,6 +73,9 @@ class Projected:
     tracked: list[bool]  # ... and the humanoid never fell (no reset)
     mpjpe_mm: list[float]  # mean distance to the input
     residual_force: list[float]  # mean root residual force, body weights
+    # the input's largest frame-to-frame joint move, m (metrics.dynamics.largest_step): what an output's
+    # own largest move is measured against to tell P's jumps from the denoiser's (issue 62)
+    input_steps: list[float] = field(default_factory=list)
 
     @property
     def resets(self) -> list[int]:
@@ -89,6 +93,7 @@ class ProjectionLog:
     mpjpe_mm: list[float] = field(default_factory=list)
     residual: list[float] = field(default_factory=list)
     resets: list[int] = field(default_factory=list)  # times the humanoid was put back (a jump in the output)
+    input_steps: list[float] = field(default_factory=list)  # largest frame step of each input, m
 
     def add(self, done: Projected) -> Projected:
         """Count one call of P; returns ``done``."""
@@ -98,7 +103,13 @@ class ProjectionLog:
         self.mpjpe_mm += done.mpjpe_mm
         self.residual += done.residual_force
         self.resets += done.resets
+        self.input_steps += done.input_steps
         return done
+
+    def last_input_steps(self, n: int) -> list[float]:
+        """Per motion of a run whose last call projected its ``n`` motions in order, the largest frame step
+        of what that call was given (its output is the run's); empty without a call."""
+        return self.input_steps[-n:] if self.calls else []
 
     def resets_per_motion(self, n: int) -> list[int]:
         """Per motion of a run whose every call projected the same ``n`` motions in order (PhysDiff, post,
@@ -128,7 +139,7 @@ class FeatureProjector:
         n = len(joints)
         done = Projected(joints=[np.empty(0)] * n, bodies=[np.empty(0)] * n, records=[None] * n,
                          selected=[False] * n, tracked=[False] * n, mpjpe_mm=[0.0] * n,
-                         residual_force=[0.0] * n)  # fmt: skip
+                         residual_force=[0.0] * n, input_steps=[largest_step(j) for j in joints])  # fmt: skip
         by_len: dict[int, list[int]] = {}
         for i, j in enumerate(joints):
             by_len.setdefault(len(j), []).append(i)

@@ -27,7 +27,9 @@ torque), and ``residual_at_cap`` the share of frames in which it was held at one
 or torque). Against the ``none`` row's plain samples of the same requests (when it is evaluated):
 ``flight_kept``, the median share of a flying sample's flight the output keeps, and ``step_jumps``, the
 share of outputs with a frame-to-frame jump 2 cm beyond the sample's largest
-(:mod:`physmotion.metrics.dynamics`): Phys-Err alone rewards a flattened jump. Neither is Morph's imitation failure rate: ``imitation_failure_rate``, given for the ``morph`` mode, is
+(:mod:`physmotion.metrics.dynamics`): Phys-Err alone rewards a flattened jump. In every mode with P,
+``step_jumps_p``: the same against what the last P was given, so the jumps P made apart from a faster
+motion PhysDiff's denoising made after an earlier P. None is Morph's imitation failure rate: ``imitation_failure_rate``, given for the ``morph`` mode, is
 the share of its motions whose imitation failed (MPJPE past 0.5 m), so that the sampled motion was kept.
 """
 
@@ -71,6 +73,7 @@ RESET_COLUMNS = {"reset_rate": "reset_rate (share)", "resets": "resets (per moti
                  "residual_force": "root force (W)", "residual_force_p95": "root force p95 (W)",
                  "residual_at_cap": "root help at a cap (share)",
                  "flight_kept": "flight kept (median)", "step_jumps": "jumps past the sample's (share)",
+                 "step_jumps_p": "jumps past P's input (share)",
                  "residual_torque": "root torque (W m)", "residual_torque_p95": "root torque p95 (W m)",
                  "over_limit": "joint torque over limit (share)",
                  "imitation_failure_rate": "imitation_failure_rate (share)"}
@@ -278,6 +281,11 @@ def _generate(model, captions, items, gen_cfg, batch, tick) -> tuple[list, list,
         results.append(out)
         tick(len(joints))
     columns = reset_columns(results) | residual_columns(results) | imitation_columns(results)
+    given = [s for out in results for s in out.projections.last_input_steps(len(out.motions))]
+    if given:  # a mode with P: the jumps its last P made, apart from what denoising after an earlier P did
+        from physmotion.metrics.dynamics import jumps_past
+
+        columns["step_jumps_p"] = jumps_past(joints, given)
     return joints, bodies, time.perf_counter() - start, columns
 
 

@@ -7,7 +7,9 @@ needed shows in no physical metric: these two columns sit next to it (issue 62).
   ``min_flight`` up at once, :func:`~physmotion.metrics.actions.flight_height`), the median of the
   output's flight height over the sample's;
 - :func:`step_jumps`: the share of outputs whose fastest joint moves further in one frame than the plain
-  sample's fastest does, by more than ``margin``: a teleport (a reset) a viewer would see.
+  sample's fastest does, by more than ``margin``: a teleport (a reset) a viewer would see, or, in
+  PhysDiff, a faster motion the denoiser made after an earlier P;
+- :func:`jumps_past`: the same against given largest steps, such as those of P's own input.
 
 All joints are (T, 22, 3) metres, Y up, one array per motion, outputs and samples in the same order.
 """
@@ -54,7 +56,20 @@ def flight_kept(outputs: Sequence[np.ndarray], samples: Sequence[np.ndarray],
 def step_jumps(outputs: Sequence[np.ndarray], samples: Sequence[np.ndarray], margin: float = STEP_MARGIN) -> float:
     """Share of outputs whose :func:`largest_step` passes their sample's by more than ``margin``."""
     _check(outputs, samples)
-    over = [largest_step(out) > largest_step(sample) + margin for out, sample in zip(outputs, samples)]
+    return jumps_past(outputs, [largest_step(s) for s in samples], margin)
+
+
+def jumps_past(outputs: Sequence[np.ndarray], steps: Sequence[float], margin: float = STEP_MARGIN) -> float:
+    """Share of outputs whose :func:`largest_step` passes the matching ``steps`` (m) by more than ``margin``.
+
+    With the largest steps of what the last P was given (``ProjectionLog.last_input_steps``) this counts
+    the jumps P made; against the plain samples (:func:`step_jumps`) it also counts what PhysDiff's
+    denoising changed after an earlier P (docs/decisions/sampling.md: "jumps past the sample's: P's or
+    the denoiser's").
+    """
+    if len(outputs) != len(steps):
+        raise ValueError(f"{len(outputs)} outputs against {len(steps)} reference steps")
+    over = [largest_step(out) > step + margin for out, step in zip(outputs, steps)]
     return float(np.mean(over)) if over else 0.0
 
 

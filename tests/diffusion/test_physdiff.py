@@ -5,10 +5,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 import torch
 
 from physmotion.diffusion.physdiff import FeatureProjector, ProjectionLog, joints_to_features
 from physmotion.features.humanml3d import recover_from_ric
+from physmotion.metrics.dynamics import largest_step
 
 
 def _walk(built_dir: Path) -> np.ndarray:
@@ -37,6 +39,11 @@ def test_projector_simulates_a_real_walk(built_dir: Path, tiny_model) -> None:
     assert done.joints[0].shape == (80, 22, 3) and done.bodies[0].shape == (22, 3)
     log = ProjectionLog()
     assert log.add(done) is done and log.calls == 1 and log.selected == [True] and log.resets == done.resets
+    # what P was given: the walk as recovered (a constant floor shift moves nothing between frames)
+    walk = recover_from_ric(tiny_model.normalizer.denormalize(x0[0, :80].numpy()).astype(np.float64))
+    assert log.last_input_steps(1) == done.input_steps
+    assert done.input_steps[0] == pytest.approx(largest_step(walk), abs=1e-9) and done.input_steps[0] > 0.01
+    assert ProjectionLog().last_input_steps(1) == []
     sim = recover_from_ric(tiny_model.normalizer.denormalize(out[0, :80].numpy()).astype(np.float64))
     ref = recover_from_ric(feats.astype(np.float64))
     err = np.linalg.norm((sim - sim[:, :1]) - (ref - ref[:, :1]), axis=-1).mean()

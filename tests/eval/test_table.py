@@ -54,6 +54,9 @@ def test_quick_table_has_every_row_and_metric(quick_table):
         at_cap = row["residual_at_cap"][0]
         assert 0 <= at_cap <= 1 and (at_cap > 0.05 or row["residual_force_p95"][0] <= 0.297)
         assert 0 <= row["step_jumps"][0] <= 1 and row.get("flight_kept", (1.0, 0))[0] >= 0
+        assert 0 <= row["step_jumps_p"][0] <= 1  # present in every mode with P
+    # post:1's one P is given the plain sample itself: its jumps past P's input are its jumps past the sample
+    assert quick_table.rows["post:1"]["step_jumps_p"] == quick_table.rows["post:1"]["step_jumps"]
     # post:1 projects each output once, and a projection that fell is one with a reset
     assert quick_table.rows["post:1"]["fell"][0] == pytest.approx(quick_table.rows["post:1"]["reset_rate"][0])
     for name in (REAL, "none", "none+floor"):
@@ -63,6 +66,7 @@ def test_quick_table_has_every_row_and_metric(quick_table):
     floor = quick_table.rows["none+floor"]
     assert floor["step_jumps"][0] == 0.0 and floor.get("flight_kept", (1.0, 0))[0] == pytest.approx(1.0)
     assert "step_jumps" not in quick_table.rows["none"] and "step_jumps" not in quick_table.rows[REAL]
+    assert "step_jumps_p" not in floor and "step_jumps_p" not in quick_table.rows["none"]
     # the metrics' floor convention: real motions grounded on the body surface sink nowhere, and
     # none+floor never penetrates more than none
     assert quick_table.rows[REAL]["penetrate"][0] < 2.0

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from physmotion.metrics.dynamics import flight_kept, flight_ratios, largest_step, step_jumps
+from physmotion.metrics.dynamics import flight_kept, flight_ratios, jumps_past, largest_step, step_jumps
 
 
 @pytest.fixture(scope="module")
@@ -39,3 +39,8 @@ def test_a_teleport_is_a_jump_past_the_sample(jump_and_walk) -> None:
     assert step_jumps([walk + 0.01], [walk]) == 0.0  # a constant shift moves nothing between frames
     with pytest.raises(ValueError, match="pair"):
         step_jumps([walk], [])
+    # against given largest steps (what P was given): the same count, from the steps alone
+    assert jumps_past([walk, moved], [largest_step(walk)] * 2) == 0.5
+    assert jumps_past([moved], [largest_step(moved) - 0.019]) == 0.0  # within the 2 cm margin
+    with pytest.raises(ValueError, match="reference steps"):
+        jumps_past([walk], [])
