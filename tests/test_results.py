@@ -396,6 +396,20 @@ def morph_search_quotes() -> list[str]:
     ]
 
 
+def step_jumps_quotes() -> list[str]:
+    """Whose jumps are "jumps past the sample's" (results/step_jumps.json): PhysDiff's against the plain sample
+    and against what its last P was given, the denoiser's share, and the resets among the flagged."""
+    rows = _load("step_jumps.json")["modes"]
+    d, p = rows["physdiff:end:2,space:1"], rows["post:1"]
+
+    def pct(x: float) -> str:
+        return f"{100 * x:.0f} %"
+
+    return [f"{pct(d['past_sample'])} of PhysDiff's outputs", f"{pct(d['input_past_sample'])} of the motions the last P",
+            f"{pct(d['past_input'])} of PhysDiff's outputs and {pct(p['past_input'])} of post:1's",
+            f"{pct(d['past_sample_with_reset'])} and {pct(p['past_sample_with_reset'])} of the flagged outputs"]
+
+
 QUOTES = {  # which doc quotes which result file
     ("docs results", "evaluate"): evaluate_quotes,
     ("docs results", "bench"): bench_quotes,
@@ -430,6 +444,8 @@ QUOTES = {  # which doc quotes which result file
     ("limitations", "learn"): learn_quotes,
     ("results", "learn at scale"): learn_at_scale_quotes,
     ("limitations", "learn at scale"): learn_at_scale_quotes,
+    ("limitations", "step jumps"): step_jumps_quotes,
+    ("results", "step jumps"): step_jumps_quotes,
 }
 
 
@@ -443,7 +459,7 @@ def _section(text: str, source: str) -> str:
              "new prompts fine": "new_prompts_fine",
              "biomodiffuse": "results/biomodiffuse", "refine": "results/refine", "imitator": "results/imitator_",
              "imitator captured": "results/imitator_captured", "learn": "learn_from_search", "learn at scale": "learn_at_scale",
-             "morph search": "morph_search.*"}
+             "morph search": "morph_search.*", "step jumps": "results/step_jumps"}
     marker = files[source]
     return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
 
