@@ -48,6 +48,7 @@ def measure(data: Path, split: str, seeds: list[int], modes: list[str], batch: i
 
     from physmotion.data.dataset import load_items
     from physmotion.diffusion.model import MotionDiffusion
+    from physmotion.eval.table import draw_captions
     from physmotion.generate import GenerateConfig, generate
 
     items = load_items(data, split, max_frames=196)[:max_motions]
@@ -55,8 +56,7 @@ def measure(data: Path, split: str, seeds: list[int], modes: list[str], batch: i
     rows: dict[str, dict[str, list]] = {m: {"out": [], "plain": [], "given": [], "reset": [], "where": []}
                                         for m in modes}  # fmt: skip
     for seed in seeds:
-        rng = np.random.default_rng((seed, 1))
-        captions = [it.captions[rng.integers(len(it.captions))] for it in items]
+        captions = draw_captions(items, seed)
         for i in range(0, len(items), batch):
             chunk, lengths = captions[i : i + batch], [len(it.features) for it in items[i : i + batch]]
             cfg = GenerateConfig(seed=seed * 100_000 + i)

@@ -175,7 +175,7 @@ def evaluate(
     if cfg.repeats < 1:
         raise PhysmotionError("--repeats must be at least 1")
     items = _items(data, cfg, model.denoiser.max_frames)
-    captions = _captions(items, cfg.seed)
+    captions = draw_captions(items, cfg.seed)
     real_emb = evaluator.encode_motions([it.features for it in items])
     text_emb = evaluator.encode_texts(captions)
     metric_surface(cfg.surface)  # a bad name fails before any work
@@ -236,7 +236,8 @@ def _items(data: str | Path, cfg: EvaluateConfig, max_frames: int) -> list[Motio
     return items
 
 
-def _captions(items: list[MotionItem], seed: int) -> list[str]:
+def draw_captions(items: list[MotionItem], seed: int) -> list[str]:
+    """One caption per motion of ``items``, drawn as every evaluation run draws them (seeded by ``seed``)."""
     rng = np.random.default_rng((seed, 1))
     return [it.captions[rng.integers(len(it.captions))] for it in items]
 
