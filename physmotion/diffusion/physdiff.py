@@ -12,6 +12,12 @@ step), as PhysDiff's Sec. 4.4 does:
   50 steps and N = 4, the paper's example);
 - ``start:M,end:N``: the first M and the last N steps;
 - ``end:N,space:S``: t = 0, S, 2S, ... (N of them), e.g. ``end:4,space:1`` = the last four steps.
+
+Any schedule may add ``fly:last``: a motion whose denoised x0 flies at a projection step before the last
+(both feet at least :data:`~physmotion.metrics.dynamics.MIN_FLIGHT` up at once) is not projected there,
+only at the last one. P keeps less of a flight than the motion had (the tracker holds the body near the
+floor), and the denoiser follows the lowered motion, so the loss compounds over the projections
+(docs/decisions/sampling.md: "PhysDiff with one P at the end for a motion that flies").
 """
 
 from __future__ import annotations
@@ -37,10 +43,30 @@ def projection_settings(config: ProjectionConfig) -> dict[str, bool | float]:
             "search_fallback": config.fallback}
 
 
+FLY_LAST = "fly:last"
+"""The schedule modifier that projects a flying motion at the last scheduled step only (module docstring)."""
+
+
+def _fields(spec: str) -> dict[str, str]:
+    try:
+        return dict(part.split(":") for part in spec.replace(" ", "").split(","))
+    except ValueError:
+        raise PhysmotionError(f"bad schedule {spec!r}: use uniform:N, start:M,end:N or end:N,space:S") from None
+
+
+def flies_last(spec: str) -> bool:
+    """Whether schedule ``spec`` carries ``fly:last``."""
+    fly = _fields(spec).get("fly")
+    if fly not in (None, "last"):
+        raise PhysmotionError(f"bad schedule {spec!r}: the only fly option is {FLY_LAST}")
+    return fly == "last"
+
+
 def parse_schedule(spec: str, steps: int) -> list[int]:
     """Loop indices (0 = first sampling step) at which to project, ascending, for a schedule string."""
+    flies_last(spec)  # checks the modifier
+    fields = {k: v for k, v in _fields(spec).items() if k != "fly"}
     try:
-        fields = dict(part.split(":") for part in spec.replace(" ", "").split(","))
         values = {k: int(v) for k, v in fields.items()}
     except ValueError:
         raise PhysmotionError(f"bad schedule {spec!r}: use uniform:N, start:M,end:N or end:N,space:S") from None
@@ -76,6 +102,8 @@ class Projected:
     # the input's largest frame-to-frame joint move, m (metrics.dynamics.largest_step): what an output's
     # own largest move is measured against to tell P's jumps from the denoiser's (issue 62)
     input_steps: list[float] = field(default_factory=list)
+    # each motion's place in the run's batch, where a call projects only some (``fly:last``); None: all, in order
+    indices: list[int] | None = None
 
     @property
     def resets(self) -> list[int]:
@@ -94,10 +122,12 @@ class ProjectionLog:
     residual: list[float] = field(default_factory=list)
     resets: list[int] = field(default_factory=list)  # times the humanoid was put back (a jump in the output)
     input_steps: list[float] = field(default_factory=list)  # largest frame step of each input, m
+    motions: list[int] = field(default_factory=list)  # each projection's motion: its place in the run's batch
 
     def add(self, done: Projected) -> Projected:
         """Count one call of P; returns ``done``."""
         self.calls += 1
+        self.motions += done.indices if done.indices is not None else list(range(len(done.joints)))
         self.selected += done.selected
         self.tracked += done.tracked
         self.mpjpe_mm += done.mpjpe_mm
@@ -112,11 +142,14 @@ class ProjectionLog:
         return self.input_steps[-n:] if self.calls else []
 
     def resets_per_motion(self, n: int) -> list[int]:
-        """Per motion of a run whose every call projected the same ``n`` motions in order (PhysDiff, post,
-        Morph), its resets over all calls; zeros without a call."""
-        if len(self.resets) % max(n, 1):
-            raise ValueError(f"the log's {len(self.resets)} projections are not calls on the same {n} motions")
-        return [int(sum(self.resets[i::n])) for i in range(n)]
+        """Per motion of a run of ``n`` motions (PhysDiff, post, Morph), its resets over all calls; zeros
+        without a call."""
+        if self.motions and max(self.motions) >= n:
+            raise ValueError(f"the log's projections are not of a run of {n} motions")
+        out = [0] * n
+        for i, r in zip(self.motions, self.resets):
+            out[i] += int(r)
+        return out
 
 
 class FeatureProjector:
@@ -152,16 +185,25 @@ class FeatureProjector:
                 done.residual_force[i] = float(res.residual_force[k].mean())
         return done
 
-    def project_features(self, x0: torch.Tensor, lengths: list[int]) -> tuple[torch.Tensor, Projected]:
+    def joints(self, x0: torch.Tensor, lengths: list[int]) -> list[np.ndarray]:
+        """The joints (T_i, 22, 3) of a denoised x0 (B, T, D) normalised, in the data convention P takes."""
+        feats = self.model.normalizer.denormalize(x0.detach().float().cpu().numpy())
+        return self.data_floor([recover_from_ric(feats[i, :n].astype(np.float64)) for i, n in enumerate(lengths)])
+
+    def project_features(self, x0: torch.Tensor, lengths: list[int],
+                         only: list[int] | None = None) -> tuple[torch.Tensor, Projected]:  # fmt: skip
         """P on a denoised x0 (B, T, D) normalised, as PhysDiff's Algorithm 2 applies it inside sampling:
-        returns the projected x0 (same shape; frames past each length as given) and what P did."""
+        returns the projected x0 (same shape; frames past each length as given) and what P did. ``only``:
+        the motions to project (the others pass through as given, and ``Projected`` lists the ones done)."""
         norm = self.model.normalizer
-        feats = norm.denormalize(x0.detach().float().cpu().numpy())
-        joints = [recover_from_ric(feats[i, :n].astype(np.float64)) for i, n in enumerate(lengths)]
-        done = self.project_joints(self.data_floor(joints))
+        joints = self.joints(x0, lengths)
+        chosen = list(range(len(lengths))) if only is None else list(only)
+        done = self.project_joints([joints[i] for i in chosen])
+        done.indices = None if only is None else chosen
         out = x0.detach().clone()
         dim = x0.shape[-1]  # 263, or BioMoDiffuse's 329: the features are re-extracted in the model's own
-        for i, (n, j) in enumerate(zip(lengths, done.joints)):
+        for i, j in zip(chosen, done.joints):
+            n = lengths[i]
             out[i, :n] = torch.from_numpy(norm.normalize(joints_to_features(j, dim, self.model.floor))).to(out)
         return out, done
 

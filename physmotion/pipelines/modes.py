@@ -10,7 +10,8 @@ Spellings (``generate --physics``, ``evaluate --physics`` as a comma list, table
 - ``post[:K]``: K applications of P after sampling (default 1), the post-processing baseline;
 - ``physdiff[:SCHEDULE]``: PhysDiff's Algorithm 2, P inside sampling at the steps of SCHEDULE
   (``uniform:N``, ``start:M,end:N`` or ``end:N,space:S``; default ``end:2,space:1``, the last two of the default 10 steps; PhysDiff's own,
-  ``end:4,space:1``, is for 50 DDIM steps);
+  ``end:4,space:1``, is for 50 DDIM steps); adding ``fly:last`` projects a motion that flies at the last
+  scheduled step only;
 - ``morph``: Morph's inference (Sec. 3.3 "Inference"): plain sampling, then one P with Morph's imitation
   selection (``ProjectionConfig()``: no reset; where the imitation fails, MPJPE past tau = 0.5 m, the
   sampled motion is kept and counted as an imitation failure). Meant for a Morph fine-tuned model, and
@@ -84,6 +85,15 @@ class PhysicsMode:
     def projects(self) -> bool:
         """P is applied (post, physdiff or morph)."""
         return self.kind in (POST, PHYSDIFF, MORPH)
+
+    @property
+    def flies_last(self) -> bool:
+        """PhysDiff's schedule carries ``fly:last`` (:mod:`physmotion.diffusion.physdiff`)."""
+        if self.kind != PHYSDIFF:
+            return False
+        from physmotion.diffusion.physdiff import flies_last
+
+        return flies_last(self.schedule)
 
     def hook_steps(self, steps: int) -> list[int]:
         """Sampling-loop indices at which PhysDiff projects (empty for the other modes); raises

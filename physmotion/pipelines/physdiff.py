@@ -13,17 +13,22 @@ import torch
 from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.physdiff import FeatureProjector, Projected, ProjectionLog, on_data_floor
 from physmotion.diffusion.samplers import SamplerConfig, sample
+from physmotion.metrics.actions import flight_height
+from physmotion.metrics.dynamics import MIN_FLIGHT
 from physmotion.physics.projection import ProjectionConfig, SimRecord
 from physmotion.pipelines.base import Physical, Pipeline, Progress
 from physmotion.pipelines.modes import DEFAULT_SCHEDULE, PhysicsMode
 
 
 def _physical(calls: list[Projected]) -> Physical:
-    """The last of P's calls on the same motions as the output, with every call's resets counted in its
-    records (a fall in an earlier call is one the user should know of, though sampling went on from it)."""
+    """The last of P's calls, which projects every motion of the output, with every call's resets counted
+    in its records (a fall in an earlier call is one the user should know of, though sampling went on
+    from it; an earlier call may have projected only some motions: ``fly:last``)."""
     records: list[SimRecord | None] = [None] * len(calls[-1].joints)
     for done in calls:
-        records = [r.after(before) for r, before in zip(done.records, records)]
+        for k, r in enumerate(done.records):
+            i = k if done.indices is None else done.indices[k]
+            records[i] = r.after(records[i])
     return Physical(list(calls[-1].joints), list(calls[-1].bodies), records)
 
 
@@ -43,9 +48,15 @@ class PhysDiffPipeline(Pipeline):
                 on_step: Progress | None) -> tuple[torch.Tensor, Physical | None]:  # fmt: skip
         projector = FeatureProjector(self.model, self.projection)
         done: list[Projected] = []
+        calls = iter(range(len(self.steps)))
 
         def hook(x0: torch.Tensor, hook_lengths: list[int]) -> torch.Tensor:
-            x, projected = projector.project_features(x0, hook_lengths)
+            only = None
+            if self.mode.flies_last and next(calls) < len(self.steps) - 1:  # fly:last, before the last step
+                only = [i for i, j in enumerate(projector.joints(x0, hook_lengths)) if flight_height(j) < MIN_FLIGHT]
+                if not only:
+                    return x0
+            x, projected = projector.project_features(x0, hook_lengths, only)
             done.append(log.add(projected))
             return x
 

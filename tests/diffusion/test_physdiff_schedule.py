@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from physmotion.diffusion.physdiff import parse_schedule
+from physmotion.diffusion.physdiff import flies_last, parse_schedule
 from physmotion.errors import PhysmotionError
+from physmotion.pipelines.modes import PhysicsMode, parse_modes
 
 
 def _t(indices: list[int], steps: int = 50) -> set[int]:
@@ -27,8 +28,19 @@ def test_counts_and_zero() -> None:
     assert len(parse_schedule("start:2,end:2", 50)) == 4
 
 
+def test_fly_last_changes_who_is_projected_not_when() -> None:
+    """``fly:last`` keeps the steps of the schedule it modifies, and travels through a mode's spelling."""
+    assert parse_schedule("end:2,space:1,fly:last", 10) == parse_schedule("end:2,space:1", 10) == [8, 9]
+    assert flies_last("fly:last,uniform:4") and not flies_last("end:2,space:1")
+    mode = PhysicsMode.parse("physdiff:end:2,space:1,fly:last")
+    assert mode.flies_last and str(mode) == "physdiff:end:2,space:1,fly:last" and mode.hook_steps(10) == [8, 9]
+    assert not PhysicsMode.parse("physdiff").flies_last and not PhysicsMode.parse("post:1").flies_last
+    modes = parse_modes("none,physdiff:end:2,space:1,fly:last,post:1")
+    assert [str(m) for m in modes] == ["none", "physdiff:end:2,space:1,fly:last", "post:1"]
+
+
 @pytest.mark.parametrize("bad", ["", "end:4", "uniform:x", "end:4,space:0", "sideways:2", "end:20,space:3",
-                                 "uniform:-1"])
+                                 "uniform:-1", "end:2,space:1,fly:first", "fly:last"])
 def test_bad_schedules(bad: str) -> None:
     with pytest.raises(PhysmotionError):
         parse_schedule(bad, 50)

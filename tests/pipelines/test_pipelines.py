@@ -56,6 +56,40 @@ def test_physdiff_returns_its_projections_in_the_prompts_order(model: MotionDiff
     assert all(np.array_equal(a.joints, b.joints) for a, b in zip(res.motions, again.motions))
 
 
+def test_fly_last_projects_a_flying_motion_at_the_last_step_only(model: MotionDiffusion) -> None:
+    """With ``fly:last``, a motion whose denoised x0 flies when the first P comes is left to the last one,
+    which projects every motion; each motion's resets are the sum over the calls that projected it."""
+    from physmotion.diffusion.physdiff import FeatureProjector
+    from physmotion.metrics.actions import flight_height
+    from physmotion.metrics.dynamics import MIN_FLIGHT
+
+    prompts = ["someone leaps high into the air", "a person walks forward", "a person does three small jumps in a row"]
+    seen: list[list[bool]] = []
+    pipeline = PhysDiffPipeline(model, FEW, schedule="end:2,space:1,fly:last")
+    joints = FeatureProjector.joints
+
+    def spy(self, x0, lengths):  # what the first P sees: which motions fly
+        out = joints(self, x0, lengths)
+        seen.append([flight_height(j) >= MIN_FLIGHT for j in out])
+        return out
+
+    FeatureProjector.joints = spy
+    try:
+        res = pipeline(prompts, [80, 80, 80], seed=0)
+    finally:
+        FeatureProjector.joints = joints
+    flying = seen[0]
+    assert any(flying) and not all(flying)  # the set has both kinds at the first P (seed 0, shipped model)
+    log = res.projections
+    assert log.calls == 2 and log.motions == [i for i, f in enumerate(flying) if not f] + [0, 1, 2]
+    assert res.resets == log.resets_per_motion(3) == [m.resets for m in res.motions]
+    assert all(m.humanoid is not None for m in res.motions)  # the last call's simulation is every output
+    plain = PhysDiffPipeline(model, FEW, schedule="end:2,space:1")(prompts, [80, 80, 80], seed=0)
+    assert plain.projections.motions == [0, 1, 2, 0, 1, 2]
+    walk = flying.index(False)  # a motion projected twice either way is the same motion
+    assert np.array_equal(res.motions[walk].joints, plain.motions[walk].joints)
+
+
 def test_post_projects_k_times_after_sampling(model: MotionDiffusion) -> None:
     steps: list[tuple[int, int]] = []
     post = PostProjectionPipeline(model, FEW, projections=2)
