@@ -22,7 +22,8 @@ ROWS = (
     ("none+floor", "generated, then moved up or down onto the floor (`none+floor`)"),
     ("post:1", "generated, then one simulation (`post:1`)"),
     ("post:4", "generated, then four simulations (`post:4`)"),
-    ("physdiff:end:2,space:1", "**PhysDiff: simulations inside generation (`physdiff`, the last 2 steps)**"),
+    ("physdiff:end:2,space:1,fly:last",
+     "**PhysDiff: simulations inside generation (`physdiff`, the last 2 steps; a motion that flies, the last)**"),
 )
 
 

@@ -3,7 +3,8 @@
 This module checks a request, chooses each motion's length, hands the work to the pipeline of
 ``GenerateConfig.physics`` (:func:`pipeline_for`; the methods live in :mod:`physmotion.pipelines`) and
 writes the files. The modes: ``none``, ``none+floor``, ``post[:K]``, ``physdiff[:SCHEDULE]`` (the default,
-the last 2 of the default sampler's 10 DPM-Solver++ steps, ``end:2,space:1``) or ``morph``.
+the last 2 of the default sampler's 10 DPM-Solver++ steps, a motion that flies the last only,
+``end:2,space:1,fly:last``) or ``morph``.
 
 P in generation is :meth:`ProjectionConfig.sampling`: where the humanoid falls (its error passes 0.15 m)
 it is put back on the motion and the simulation goes on (reset-on-fail), so the output is always the

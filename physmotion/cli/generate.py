@@ -118,9 +118,10 @@ def generate_cmd(
     physics: str | None = typer.Option(
         None, help="none, none+floor (plain sampling, shifted onto the floor as well as a constant "
         "shift can), post[:K] (K projections after sampling), physdiff[:SCHEDULE] (projection "
-        "inside sampling; SCHEDULE uniform:N, start:M,end:N or end:N,space:S) or morph (one projection "
-        "after sampling that keeps the sampled motion where the humanoid fails to imitate it, Morph's "
-        "inference) (default: physdiff:end:2,space:1)."),
+        "inside sampling; SCHEDULE uniform:N, start:M,end:N or end:N,space:S, and ,fly:last to project a "
+        "motion that flies at the last of those steps only) or morph (one projection after sampling that "
+        "keeps the sampled motion where the humanoid fails to imitate it, Morph's inference) "
+        "(default: physdiff:end:2,space:1,fly:last)."),
     num: int | None = typer.Option(None, help="Samples per caption (default: 1)."),
     seed: int | None = typer.Option(None, help="Random seed; the same seed gives the same motions (default: 0)."),
     sampler: str | None = typer.Option(None, help=SAMPLER_HELP),

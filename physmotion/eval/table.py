@@ -62,6 +62,7 @@ from physmotion.metrics.generation import (
 )
 from physmotion.motion import write_atomic
 from physmotion.physics.surface import ground_on_surface
+from physmotion.pipelines.modes import DEFAULT_SCHEDULE
 from physmotion.pipelines.modes import PhysicsMode
 
 REAL = "real"
@@ -83,7 +84,7 @@ RESET_COLUMNS = {"reset_rate": "reset_rate (share)", "resets": "resets (per moti
 class EvaluateConfig:
     """One evaluation run. ``quick()`` is the smoke-test preset."""
 
-    modes: tuple[str, ...] = ("none", "none+floor", "post:1", "post:4", "physdiff:end:2,space:1")
+    modes: tuple[str, ...] = ("none", "none+floor", "post:1", "post:4", f"physdiff:{DEFAULT_SCHEDULE}")
     split: str = "test"
     repeats: int = 3  # Guo: 20; one repeat of four modes costs minutes here
     max_motions: int | None = None  # a seeded subset of the split

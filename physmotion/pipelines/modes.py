@@ -9,9 +9,9 @@ Spellings (``generate --physics``, ``evaluate --physics`` as a comma list, table
   and the fair baseline for the physics modes;
 - ``post[:K]``: K applications of P after sampling (default 1), the post-processing baseline;
 - ``physdiff[:SCHEDULE]``: PhysDiff's Algorithm 2, P inside sampling at the steps of SCHEDULE
-  (``uniform:N``, ``start:M,end:N`` or ``end:N,space:S``; default ``end:2,space:1``, the last two of the default 10 steps; PhysDiff's own,
-  ``end:4,space:1``, is for 50 DDIM steps); adding ``fly:last`` projects a motion that flies at the last
-  scheduled step only;
+  (``uniform:N``, ``start:M,end:N`` or ``end:N,space:S``; PhysDiff's own, ``end:4,space:1``, is for 50
+  DDIM steps), optionally with ``fly:last``: a motion that flies is projected at the last scheduled step
+  only. Default ``end:2,space:1,fly:last``: the last two of the default 10 steps, a flying motion the last;
 - ``morph``: Morph's inference (Sec. 3.3 "Inference"): plain sampling, then one P with Morph's imitation
   selection (``ProjectionConfig()``: no reset; where the imitation fails, MPJPE past tau = 0.5 m, the
   sampled motion is kept and counted as an imitation failure). Meant for a Morph fine-tuned model, and
@@ -27,8 +27,9 @@ from physmotion.errors import PhysmotionError
 NONE, FLOOR, POST, PHYSDIFF, MORPH = "none", "none+floor", "post", "physdiff", "morph"
 KINDS = (NONE, FLOOR, POST, PHYSDIFF, MORPH)
 # The last two of the default sampler's 10 steps, at the noise levels of PhysDiff's own choice, the last
-# four of 50 DDIM steps (docs/decisions/sampling.md: "few-step sampling as the default").
-DEFAULT_SCHEDULE = "end:2,space:1"
+# four of 50 DDIM steps (docs/decisions/sampling.md: "few-step sampling as the default"); a motion that
+# flies only the last (docs/decisions/sampling.md: "PhysDiff with one P at the end for a motion that flies").
+DEFAULT_SCHEDULE = "end:2,space:1,fly:last"
 MAX_POST_PROJECTIONS = 50
 _USAGE = "use none, none+floor, post[:K], physdiff[:SCHEDULE] or morph"
 

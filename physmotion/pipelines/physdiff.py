@@ -33,7 +33,8 @@ def _physical(calls: list[Projected]) -> Physical:
 
 
 class PhysDiffPipeline(Pipeline):
-    """P at the loop indices of ``schedule`` (``end:2,space:1``: the last two steps)."""
+    """P at the loop indices of ``schedule`` (``end:2,space:1``: the last two steps; ``fly:last``: a motion
+    whose denoised x0 flies at the first of them only at the last)."""
 
     projects = True
 

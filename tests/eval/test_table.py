@@ -16,11 +16,11 @@ from physmotion.pipelines.modes import PhysicsMode, parse_modes
 def test_parse_modes_keeps_schedule_commas_and_spells_back():
     modes = parse_modes("none,none+floor,post:1,post,physdiff:end:4,space:1,physdiff")
     assert [str(m) for m in modes] == ["none", "none+floor", "post:1", "post:1", "physdiff:end:4,space:1",
-                                       "physdiff:end:2,space:1"]  # fmt: skip
+                                       "physdiff:end:2,space:1,fly:last"]  # fmt: skip
     assert [str(m) for m in parse_modes("physdiff:start:2,end:2, physdiff:uniform:4")] == [
         "physdiff:start:2,end:2", "physdiff:uniform:4"]  # fmt: skip
     assert PhysicsMode.parse("post:4") == PhysicsMode("post", projections=4)
-    assert str(PhysicsMode()) == "physdiff:end:2,space:1"  # the last 2 of the default 10 steps
+    assert str(PhysicsMode()) == "physdiff:end:2,space:1,fly:last"  # the last 2 of the default 10 steps
     with pytest.raises(PhysmotionError):
         parse_modes(" , ")
 
