@@ -20,7 +20,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results"
 PHYSDIFF = "physdiff:end:4,space:1"  # the DDIM-50 tables' PhysDiff (physdiff_quality, new_prompts_*, morph)
-DEFAULT_PHYSDIFF = "physdiff:end:2,space:1"  # the default sampler's, in evaluate_default
+DEFAULT_PHYSDIFF = "physdiff:end:2,space:1,fly:last"  # the default sampler's, in evaluate_default
+END2 = "physdiff:end:2,space:1"  # the default before fly:last: evaluate_base, morph_retuned, sampling_steps, step_jumps
 DOCS = {
     "README": ROOT / "README.md",
     "results": RESULTS / "README.md",
@@ -44,11 +45,10 @@ def _change(x: float, base: float) -> str:
     return f"{100 * (x / base - 1):+.0f} %"
 
 
-def evaluate_quotes(name: str = "evaluate_default.json") -> list[str]:
+def evaluate_quotes(name: str = "evaluate_default.json", pd: str = DEFAULT_PHYSDIFF) -> list[str]:
     """The test-split table (results/evaluate_default.json, the default model; evaluate_base.json, the base
-    model) as the docs quote it."""
+    model, made when PhysDiff's default was ``END2``) as the docs quote it."""
     rows = _load(name)["rows"]
-    pd = DEFAULT_PHYSDIFF
     modes = ("real", "none", "none+floor", "post:1", "post:4", pd)
     err = {m: rows[m]["phys_err"]["mean"] for m in modes}
     return [
@@ -297,7 +297,7 @@ def morph_retuned_quotes() -> list[str]:
     """The shipped Morph model against its base (results/morph_retuned.json) and against the control
     fine-tuned on real motions alone (results/morph_control.json)."""
     rows, ctrl = _pair_rows("morph_retuned.json"), _pair_rows("morph_control.json")
-    pd = DEFAULT_PHYSDIFF
+    pd = END2
 
     def err(row: dict) -> str:
         return f"{row['phys_err']['mean']:.1f}"
@@ -400,7 +400,7 @@ def step_jumps_quotes() -> list[str]:
     """Whose jumps are "jumps past the sample's" (results/step_jumps.json): PhysDiff's against the plain sample
     and against what its last P was given, the denoiser's share, and the resets among the flagged."""
     rows = _load("step_jumps.json")["modes"]
-    d, p = rows["physdiff:end:2,space:1"], rows["post:1"]
+    d, p = rows[END2], rows["post:1"]
 
     def pct(x: float) -> str:
         return f"{100 * x:.0f} %"
@@ -408,6 +408,14 @@ def step_jumps_quotes() -> list[str]:
     return [f"{pct(d['past_sample'])} of PhysDiff's outputs", f"{pct(d['input_past_sample'])} of the motions the last P",
             f"{pct(d['past_input'])} of PhysDiff's outputs and {pct(p['past_input'])} of post:1's",
             f"{pct(d['past_sample_with_reset'])} and {pct(p['past_sample_with_reset'])} of the flagged outputs"]
+
+
+def flight_fly_quotes() -> list[str]:
+    """PhysDiff's flight on jump and hop prompts before and after ``fly:last`` (results/flight_kept_fly.json)."""
+    rows = _load("flight_kept_fly.json")["rows"]
+    old, new = rows[END2], rows[DEFAULT_PHYSDIFF]
+    return [f"{old['flight_kept']:.2f} of the sample's flight", f"now keeps {new['flight_kept']:.2f}",
+            f"resets {100 * new['with_reset']:.0f} % of jump and hop outputs (before: {100 * old['with_reset']:.0f} %)"]
 
 
 QUOTES = {  # which doc quotes which result file
@@ -426,7 +434,7 @@ QUOTES = {  # which doc quotes which result file
     ("morph card", "morph retuned"): morph_retuned_quotes,
     ("results", "evaluate"): evaluate_quotes,
     ("results", "schedule"): schedule_quotes,
-    ("base card", "evaluate base"): lambda: evaluate_quotes("evaluate_base.json"),
+    ("base card", "evaluate base"): lambda: evaluate_quotes("evaluate_base.json", END2),
     ("base card", "bench base"): lambda: bench_quotes("physdiff_quality_base.json"),
     ("docs results", "bench base"): lambda: bench_quotes("physdiff_quality_base.json"),
     ("morph card", "morph"): morph_quotes,
@@ -446,6 +454,7 @@ QUOTES = {  # which doc quotes which result file
     ("limitations", "learn at scale"): learn_at_scale_quotes,
     ("limitations", "step jumps"): step_jumps_quotes,
     ("results", "step jumps"): step_jumps_quotes,
+    ("limitations", "flight fly"): flight_fly_quotes,
 }
 
 
@@ -459,7 +468,7 @@ def _section(text: str, source: str) -> str:
              "new prompts fine": "new_prompts_fine",
              "biomodiffuse": "results/biomodiffuse", "refine": "results/refine", "imitator": "results/imitator_",
              "imitator captured": "results/imitator_captured", "learn": "learn_from_search", "learn at scale": "learn_at_scale",
-             "morph search": "morph_search.*", "step jumps": "results/step_jumps"}
+             "morph search": "morph_search.*", "step jumps": "results/step_jumps", "flight fly": "flight_kept_fly"}
     marker = files[source]
     return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
 
@@ -604,16 +613,17 @@ def test_a_result_from_a_dirty_tree_says_so_and_what_is_known() -> None:
 def test_the_default_sampler_is_within_the_ddim50_rows_intervals() -> None:
     """docs/results.md: DPM-Solver++ 10 (plain, and PhysDiff at its last 2 steps), the default, has FID and R@3
     within DDIM 50's 95 % intervals (or better) in the sampling study (results/sampling_steps.json, one model
-    and evaluator for all its rows); and evaluate_default was sampled with it."""
+    and evaluator for all its rows; made before ``fly:last``, which changes which motions the first of the
+    two steps projects, not the sampler); and evaluate_default was sampled with it."""
     from physmotion.diffusion.samplers import SamplerConfig
     from physmotion.pipelines.modes import PhysicsMode
 
     rows = json.loads((ROOT / "results" / "sampling_steps.json").read_text())["rows"]
     default = SamplerConfig()
-    assert str(PhysicsMode()) == DEFAULT_PHYSDIFF
+    assert str(PhysicsMode()) == DEFAULT_PHYSDIFF == END2 + ",fly:last"
     mine = {r["physics"]: r for r in rows if (r["sampler"], r["steps"]) == (default.sampler, default.steps)}
     ddim = {r["physics"]: r for r in rows if (r["sampler"], r["steps"]) == ("ddim", 50)}
-    for physics, base in (("none", "none"), (DEFAULT_PHYSDIFF, PHYSDIFF)):
+    for physics, base in (("none", "none"), (END2, PHYSDIFF)):
         got, ref = mine[physics], ddim[base]
         assert got["FID"]["mean"] <= ref["FID"]["mean"] + ref["FID"]["ci95"], physics
         assert got["R@3"]["mean"] >= ref["R@3"]["mean"] - ref["R@3"]["ci95"], physics
