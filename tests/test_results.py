@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results"
 PHYSDIFF = "physdiff:end:4,space:1"  # the DDIM-50 tables' PhysDiff (physdiff_quality, new_prompts_*, morph)
 DEFAULT_PHYSDIFF = "physdiff:end:2,space:1,fly:last"  # the default sampler's, in evaluate_default
-END2 = "physdiff:end:2,space:1"  # the default before fly:last: evaluate_base, morph_retuned, sampling_steps, step_jumps
+END2 = "physdiff:end:2,space:1"  # the default before fly:last (evaluate_base, morph_retuned, sampling_steps, ...)
 DOCS = {
     "README": ROOT / "README.md",
     "results": RESULTS / "README.md",
@@ -415,7 +415,8 @@ def flight_fly_quotes() -> list[str]:
     rows = _load("flight_kept_fly.json")["rows"]
     old, new = rows[END2], rows[DEFAULT_PHYSDIFF]
     return [f"{old['flight_kept']:.2f} of the sample's flight", f"now keeps {new['flight_kept']:.2f}",
-            f"resets {100 * new['with_reset']:.0f} % of jump and hop outputs (before: {100 * old['with_reset']:.0f} %)"]
+            f"resets {100 * new['with_reset']:.0f} % of jump and hop outputs "
+            f"(before: {100 * old['with_reset']:.0f} %)"]
 
 
 QUOTES = {  # which doc quotes which result file

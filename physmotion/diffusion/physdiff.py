@@ -102,7 +102,7 @@ class Projected:
     # the input's largest frame-to-frame joint move, m (metrics.dynamics.largest_step): what an output's
     # own largest move is measured against to tell P's jumps from the denoiser's (issue 62)
     input_steps: list[float] = field(default_factory=list)
-    # each motion's place in the run's batch, where a call projects only some (``fly:last``); None: all, in order
+    # each motion's place in the run's batch where a call projects only some (``fly:last``); None: all
     indices: list[int] | None = None
 
     @property
@@ -188,7 +188,8 @@ class FeatureProjector:
     def joints(self, x0: torch.Tensor, lengths: list[int]) -> list[np.ndarray]:
         """The joints (T_i, 22, 3) of a denoised x0 (B, T, D) normalised, in the data convention P takes."""
         feats = self.model.normalizer.denormalize(x0.detach().float().cpu().numpy())
-        return self.data_floor([recover_from_ric(feats[i, :n].astype(np.float64)) for i, n in enumerate(lengths)])
+        joints = [recover_from_ric(feats[i, :n].astype(np.float64)) for i, n in enumerate(lengths)]
+        return self.data_floor(joints)
 
     def project_features(self, x0: torch.Tensor, lengths: list[int],
                          only: list[int] | None = None) -> tuple[torch.Tensor, Projected]:  # fmt: skip

@@ -62,8 +62,7 @@ from physmotion.metrics.generation import (
 )
 from physmotion.motion import write_atomic
 from physmotion.physics.surface import ground_on_surface
-from physmotion.pipelines.modes import DEFAULT_SCHEDULE
-from physmotion.pipelines.modes import PhysicsMode
+from physmotion.pipelines.modes import DEFAULT_SCHEDULE, PhysicsMode
 
 REAL = "real"
 GENERATION_COLUMNS = ("R@1", "R@2", "R@3", "FID", "MM-Dist", "Diversity", "MModality", "sec/motion")

@@ -54,7 +54,8 @@ class PhysDiffPipeline(Pipeline):
         def hook(x0: torch.Tensor, hook_lengths: list[int]) -> torch.Tensor:
             only = None
             if self.mode.flies_last and next(calls) < len(self.steps) - 1:  # fly:last, before the last step
-                only = [i for i, j in enumerate(projector.joints(x0, hook_lengths)) if flight_height(j) < MIN_FLIGHT]
+                joints = projector.joints(x0, hook_lengths)
+                only = [i for i, j in enumerate(joints) if flight_height(j) < MIN_FLIGHT]
                 if not only:
                     return x0
             x, projected = projector.project_features(x0, hook_lengths, only)

@@ -35,7 +35,8 @@ def test_fly_last_changes_who_is_projected_not_when() -> None:
     mode = PhysicsMode.parse("physdiff:end:2,space:1,fly:last")
     assert mode.flies_last and str(mode) == "physdiff:end:2,space:1,fly:last" and mode.hook_steps(10) == [8, 9]
     assert PhysicsMode.parse("physdiff").flies_last  # the default schedule carries it
-    assert not PhysicsMode.parse("physdiff:end:2,space:1").flies_last and not PhysicsMode.parse("post:1").flies_last
+    assert not PhysicsMode.parse("physdiff:end:2,space:1").flies_last
+    assert not PhysicsMode.parse("post:1").flies_last
     modes = parse_modes("none,physdiff:end:2,space:1,fly:last,post:1")
     assert [str(m) for m in modes] == ["none", "physdiff:end:2,space:1,fly:last", "post:1"]
 

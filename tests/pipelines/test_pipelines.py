@@ -56,14 +56,17 @@ def test_physdiff_returns_its_projections_in_the_prompts_order(model: MotionDiff
     assert all(np.array_equal(a.joints, b.joints) for a, b in zip(res.motions, again.motions))
 
 
-def test_fly_last_projects_a_flying_motion_at_the_last_step_only(model: MotionDiffusion) -> None:
+def test_fly_last_projects_a_flying_motion_at_the_last_step_only(
+    model: MotionDiffusion, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """With ``fly:last``, a motion whose denoised x0 flies when the first P comes is left to the last one,
     which projects every motion; each motion's resets are the sum over the calls that projected it."""
     from physmotion.diffusion.physdiff import FeatureProjector
     from physmotion.metrics.actions import flight_height
     from physmotion.metrics.dynamics import MIN_FLIGHT
 
-    prompts = ["someone leaps high into the air", "a person walks forward", "a person does three small jumps in a row"]
+    prompts = ["someone leaps high into the air", "a person walks forward",
+               "a person does three small jumps in a row"]  # fmt: skip
     seen: list[list[bool]] = []
     pipeline = PhysDiffPipeline(model, FEW, schedule="end:2,space:1,fly:last")
     joints = FeatureProjector.joints
@@ -73,11 +76,9 @@ def test_fly_last_projects_a_flying_motion_at_the_last_step_only(model: MotionDi
         seen.append([flight_height(j) >= MIN_FLIGHT for j in out])
         return out
 
-    FeatureProjector.joints = spy
-    try:
-        res = pipeline(prompts, [80, 80, 80], seed=0)
-    finally:
-        FeatureProjector.joints = joints
+    monkeypatch.setattr(FeatureProjector, "joints", spy)
+    res = pipeline(prompts, [80, 80, 80], seed=0)
+    monkeypatch.undo()
     flying = seen[0]
     assert any(flying) and not all(flying)  # the set has both kinds at the first P (seed 0, shipped model)
     log = res.projections
