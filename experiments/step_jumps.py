@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--split", default="test")
     parser.add_argument("--seeds", default="0,1")
     parser.add_argument("--mode", action="append", default=None, help="a generate physics mode (repeatable; "
-                        "default: the default, physdiff:end:2,space:1, and post:1)")
+                        "default: physdiff:end:2,space:1, the default when results/step_jumps was made, and post:1)")
     parser.add_argument("--out", type=Path, default=Path("results/step_jumps"))
     args = parse_args(parser, argv)
     modes = args.mode or ["physdiff:end:2,space:1", "post:1"]
