@@ -237,7 +237,8 @@ def test_help_defaults_are_the_dataclasses() -> None:
         assert stated[name] == str(value), name
 
     ev = EvaluateConfig()
-    expected = {"split": ev.split, "physics": ",".join(ev.modes), "repeats": ev.repeats,
+    # the modes with a space after each mode's comma, so that the help wraps between modes, not inside one
+    expected = {"split": ev.split, "physics": ", ".join(ev.modes), "repeats": ev.repeats,
                 "steps": ev.base.sampler.steps, "seed": ev.seed, "sampler": ev.base.sampler.sampler,
                 "eta": ev.base.sampler.eta, "cfg-scale": ev.base.sampler.cfg_scale,
                 "search-fallback": "on" if ev.base.projection.fallback else "off"}  # fmt: skip

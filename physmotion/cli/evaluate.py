@@ -35,7 +35,7 @@ def evaluate_cmd(
     split: str | None = typer.Option(None, help="Split to evaluate on (default: test)."),
     physics: str | None = typer.Option(
         None, help="Comma-separated modes: none, none+floor, post:K, physdiff:<schedule>, morph "
-        "(default: none,none+floor,post:1,post:4,physdiff:end:2,space:1,fly:last)."),
+        "(default: none, none+floor, post:1, post:4, physdiff:end:2,space:1,fly:last)."),
     repeats: int | None = typer.Option(
         None, help="Repeated generation runs (95% intervals over them) (default: 3)."),
     steps: int | None = typer.Option(None, help="Sampling steps of the model's sampler; a BioMoDiffuse model "
