@@ -2,7 +2,7 @@
 then P under the sampling preset and variants of it, each against its own plain sample.
 
 Usage: python -m experiments.flight_kept [--seeds 0,1,2] [--seconds 4] [--variants sampling,ballistic,...]
-       [--mode physdiff:end:2,space:1 --mode ...] [--fallback] [--out results/flight_kept]
+       [--mode physdiff:end:2,space:1 --mode ...] [--fallback] [--recover] [--out results/flight_kept]
 
 Rows: each ``--mode`` (default: generate's default, PhysDiff with P at the last 2 steps) is ``generate``
 with that physics mode against the plain sample of the same prompt and seed; every other row is one P (as ``post:1``) of the plain samples under a variant of
@@ -51,10 +51,12 @@ def _variant(name: str):
         return replace(base, tracking=replace(base.tracking, residual_lift=0.3))
     if name == "fallback":  # the search where the tracker resets, fails or keeps under 0.8 of the flight
         return replace(base, fallback=True)
+    if name == "recover":  # the search carries the body where the tracker would reset it
+        return replace(base, recover=True)
     raise ValueError(f"unknown variant {name!r}")
 
 
-VARIANTS = ("sampling", "ballistic", "no_land", "ballistic_no_land", "lift_0.3", "fallback")
+VARIANTS = ("sampling", "ballistic", "no_land", "ballistic_no_land", "lift_0.3", "fallback", "recover")
 
 
 def _cpu_wall() -> np.ndarray:
@@ -72,9 +74,10 @@ def _cpu_wall() -> np.ndarray:
 
 
 def measure(seeds: list[int], seconds: float, variants: list[str], modes: list[str],
-            fallback: bool = False) -> dict[str, dict]:  # fmt: skip
+            fallback: bool = False, recover: bool = False) -> dict[str, dict]:  # fmt: skip
     """Row name -> figures (see the module docstring); with ``fallback``, each mode again with the search
-    as the tracker's fallback (row "<mode> +fallback")."""
+    as the tracker's fallback (row "<mode> +fallback"); with ``recover``, again with the other setting of
+    the search carrying the body where the tracker would reset it (row "<mode> +recover" or "-recover")."""
     from experiments.prompts import NEW_PROMPTS
     from physmotion.diffusion.model import MotionDiffusion
     from physmotion.diffusion.physdiff import on_data_floor
@@ -94,6 +97,9 @@ def measure(seeds: list[int], seconds: float, variants: list[str], modes: list[s
         plain += [m.joints for m in generate(prompts, cfg, model=model).motions]
         for mode in modes:
             runs = {mode: cfg.projection}
+            if recover:  # the other setting than generate's default
+                on = not cfg.projection.recover
+                runs[f"{mode} {'+' if on else '-'}recover"] = replace(cfg.projection, recover=on)
             if fallback:
                 runs[f"{mode} +fallback"] = replace(cfg.projection, fallback=True)
             for name, projection in runs.items():
@@ -118,6 +124,7 @@ def measure(seeds: list[int], seconds: float, variants: list[str], modes: list[s
                       "with_reset": float(np.mean([(m.resets or 0) > 0 for m in motions])),
                       "step_jumps": step_jumps(joints, plain), "phys_err": float(phys["phys_err"]),
                       "searched": float(np.mean([bool(m.searched) for m in motions])),
+                      "recovered": float(np.mean([(m.recovered or 0) > 0 for m in motions])),
                       "cpu_s_per_s": float(spent[name][0] / sum(m.seconds for m in motions)),
                       "wall_s_per_output": float(spent[name][1] / len(motions)), **help_stats(motions)}  # fmt: skip
     return rows
@@ -132,6 +139,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="a generate physics mode to measure (repeatable; default: generate's default)")
     parser.add_argument("--fallback", action="store_true",
                         help="each --mode again with the search as the tracker's fallback")
+    parser.add_argument("--recover", action="store_true",
+                        help="each --mode again with the other setting of ProjectionConfig.recover (the search "
+                        "carrying the body where the tracker would reset it)")
     parser.add_argument("--out", default=str(ROOT / "results" / "flight_kept"))
     args = parse_args(parser, argv)
 
@@ -143,15 +153,17 @@ def main(argv: list[str] | None = None) -> int:
         from physmotion.generate import GenerateConfig
 
         modes = args.mode if args.mode is not None else [str(GenerateConfig().physics)]
-        rows = measure(seeds, args.seconds, variants, [m for m in modes if m], args.fallback)
+        rows = measure(seeds, args.seconds, variants, [m for m in modes if m], args.fallback, args.recover)
         meta = run_meta(__file__, argv, args.tree, {name: "sampling" for name in rows}, seeds=seeds, seconds=args.seconds)
         header = ["row", "flight kept (median)", "flying samples", "outputs with a reset", "jumps past the sample's",
                   "root force p95, W", "root torque p95, W m", "held at a cap", "Phys-Err, mm", "searched",
+                  "carried by the search, not reset",
                   "CPU s / s of motion", "wall s / output"]
         body = [[name, "-" if r["flight_kept"] is None else f"{r['flight_kept']:.2f}", r["flying"],
                  f"{100 * r['with_reset']:.0f} %", f"{100 * r['step_jumps']:.0f} %",
                  f"{r['residual_force_p95']:.2f}", f"{r['residual_torque_p95']:.2f}",
                  f"{100 * r['residual_at_cap']:.0f} %", f"{r['phys_err']:.1f}", f"{100 * r['searched']:.0f} %",
+                 f"{100 * r['recovered']:.0f} %",
                  f"{r['cpu_s_per_s']:.2f}", f"{r['wall_s_per_output']:.1f}"] for name, r in rows.items()]  # fmt: skip
         table = heading("Flight kept by generation's P on jump and hop prompts", meta) + markdown_table(header, body)
         return table, write_results(args.out, table, {"meta": meta, "rows": rows})

@@ -75,6 +75,14 @@ class GenerateConfig:
                                   "searches every motion already")
         return replace(self, projection=replace(self.projection, fallback=on))
 
+    def with_search_recovery(self, on: bool) -> GenerateConfig:
+        """This run with PhysDiff's and post's P handing a fall to the search before resetting the body, or
+        resetting it at once (``ProjectionConfig.recover``; ``generate --recover/--no-recover``)."""
+        if on and self.projection.controller == "search":
+            raise PhysmotionError("--recover is for the tracker and the policy; --controller search has no "
+                                  "outside hand to fall from")
+        return replace(self, projection=replace(self.projection, recover=on))
+
     def with_controller(self, controller: str, policy: str | None = None) -> GenerateConfig:
         """This run with every P driven by ``controller`` ("tracker", "policy" or "search"; ``generate --controller``)."""
         return replace(self, projection=self.projection.with_controller(controller, policy),
@@ -276,6 +284,11 @@ def physics_summary(result: GenerateResult) -> str:
     if searched:  # --controller search, or the tracker's fallback where it fell or flattened a flight
         helped += (f"; the search (no outside hand) made {searched} of {len(result.motions)} motions (per motion "
                    "in generate.json: 'searched')")
+    recovered = [int(m.recovered or 0) for m in result.motions]
+    if any(recovered):  # ProjectionConfig.recover: the search carried the body where it would have been reset
+        helped += (f"; the search (no outside hand) carried the body {sum(recovered)} time(s) where it would "
+                   f"have been put back on the motion, in {sum(r > 0 for r in recovered)} of "
+                   f"{len(result.motions)} motions (per motion in generate.json: 'recovered')")
     if result.imitation_failed:  # morph: a failed imitation keeps the sampled motion, nothing is reset
         n, failed = len(result.imitation_failed), int(sum(result.imitation_failed))
         return (f"the simulated humanoid imitated {n - failed} of {n} motions; "
@@ -338,7 +351,7 @@ def write_outputs(
         motions.append({"prompt": motion.texts[0], "sample": int(stem.rsplit("_", 1)[1]),
                         "files": [p.name for p in files], "resets": result.resets[i] if result.projections.calls else None,
                         "reset_frames": _frame_list(motion.reset_frames),
-                        "searched": motion.searched})  # fmt: skip
+                        "searched": motion.searched, "recovered": motion.recovered})  # fmt: skip
         if result.lengths:  # the length asked for, and whether the user gave it or the text's was predicted
             motions[-1]["seconds"] = round(result.lengths[i] / FPS, 2)
             motions[-1]["length_source"] = result.length_source[i]

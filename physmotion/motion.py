@@ -43,6 +43,9 @@ class Motion:
     P call that made the motion). Each None where P was not applied (or the file predates it).
     searched: for P's output, whether the search (no outside hand) made it, as the controller or as the
     tracker's fallback (``ProjectedMotion.searched``, in any P call); None where P was not applied.
+    recovered: for P's output, how many stretches the search carried with no outside hand where the humanoid
+    would have been put back on the motion (``ProjectedMotion.recovered``, over every P call); None where P
+    was not applied (or the file predates it).
     """
 
     joints: np.ndarray
@@ -61,6 +64,7 @@ class Motion:
     residual_at_cap: np.ndarray | None = None
     reset_frames: np.ndarray | None = None
     searched: bool | None = None
+    recovered: int | None = None
 
     def __post_init__(self) -> None:
         if np.asarray(self.joints).dtype.kind not in "fiu":
@@ -121,7 +125,7 @@ class Motion:
 
     def save(self, path: str | Path) -> None:
         """Write an .npz (joints, rotations, offsets, humanoid, resets, residual, residual_cap, over_limit,
-        residual_peak, residual_at_cap, reset_frames, searched, fps, text, licence_tag) atomically."""
+        residual_peak, residual_at_cap, reset_frames, searched, recovered, fps, text, licence_tag) atomically."""
         arrays: dict[str, np.ndarray] = {
             "joints": self.joints,
             "fps": np.float32(self.fps),
@@ -150,6 +154,8 @@ class Motion:
                 arrays[name] = np.asarray(getattr(self, name), dtype=bool)
         if self.searched is not None:
             arrays["searched"] = np.bool_(self.searched)
+        if self.recovered is not None:
+            arrays["recovered"] = np.int64(self.recovered)
         write_atomic(path, lambda f: np.savez(f, **arrays))
 
     @classmethod
@@ -183,6 +189,7 @@ class Motion:
                     residual_cap=float(data["residual_cap"]) if "residual_cap" in data else None,
                     over_limit=data["over_limit"] if "over_limit" in data else None,
                     searched=bool(data["searched"]) if "searched" in data else None,
+                    recovered=int(data["recovered"]) if "recovered" in data else None,
                     **{name: data[name] for name in ("residual_peak", "residual_at_cap", "reset_frames")
                        if name in data},
                 )

@@ -13,6 +13,7 @@ from physmotion.cli._common import (
     MODEL_HELP,
     OVERWRITE_HELP,
     POLICY_HELP,
+    RECOVER_HELP,
     SAMPLER_HELP,
     SAMPLER_OPTIONS,
     SEARCH_FALLBACK_HELP,
@@ -48,6 +49,7 @@ def evaluate_cmd(
     controller: str = typer.Option("tracker", help=CONTROLLER_HELP),
     policy: Path | None = typer.Option(None, help=POLICY_HELP),
     search_fallback: bool = typer.Option(False, "--search-fallback", help=SEARCH_FALLBACK_HELP),
+    recover: bool | None = typer.Option(None, "--recover/--no-recover", help=RECOVER_HELP),
     out: Path = typer.Option(Path("results/evaluate"), "-o", "--out", help="Writes <out>.md and <out>.json."),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
@@ -72,6 +74,8 @@ def evaluate_cmd(
     cfg.base = cfg.base.with_controller(controller, _opt_str(policy))
     if search_fallback:
         cfg.base = cfg.base.with_search_fallback(True)
+    if recover is not None:
+        cfg.base = cfg.base.with_search_recovery(recover)
     with _step_bar("evaluating") as tick, _as_options(**SAMPLER_OPTIONS):
         table = evaluate(net, judge, data, cfg, on_progress=tick)
     paths = table.write(out)

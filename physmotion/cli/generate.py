@@ -17,6 +17,7 @@ from physmotion.cli._common import (
     MODEL_HELP,
     OVERWRITE_HELP,
     POLICY_HELP,
+    RECOVER_HELP,
     PREVIEW_HELP,
     SAMPLER_HELP,
     SAMPLER_OPTIONS,
@@ -139,6 +140,7 @@ def generate_cmd(
     controller: str = typer.Option("tracker", help=CONTROLLER_HELP),
     policy: Path | None = typer.Option(None, help=POLICY_HELP),
     search_fallback: bool = typer.Option(False, "--search-fallback", help=SEARCH_FALLBACK_HELP),
+    recover: bool | None = typer.Option(None, "--recover/--no-recover", help=RECOVER_HELP),
     preview: bool = typer.Option(True, help="Write a GIF preview per motion."),
     in_place: bool = typer.Option(False, "--in-place", help="Remove the root's horizontal travel (heading "
                                   "and height kept), for game loops."),
@@ -183,6 +185,8 @@ def generate_cmd(
     cfg = cfg.with_controller(controller, _opt_str(policy))
     if search_fallback:
         cfg = cfg.with_search_fallback(True)
+    if recover is not None:
+        cfg = cfg.with_search_recovery(recover)
     check_outputs(texts, out, cfg, overwrite)
     net = MotionDiffusion.load(model)
     cfg.sampler = _with(default_sampler(net), sampler=sampler, steps=steps, eta=eta, cfg_scale=cfg_scale,

@@ -17,14 +17,17 @@ def reset_columns(results: Sequence[GenerateResult]) -> dict[str, float]:
     """What the falls did to the outputs of projecting modes: ``reset_rate``, the share of output motions
     whose projection put the humanoid back at least once (error past tau, 0.15 m in generation), and
     ``resets``, the mean number of such jumps per output motion; and ``fell``, the share of all of P's
-    projections (PhysDiff's inside sampling too) in which the humanoid fell. Empty for modes without P's
-    output."""
+    projections (PhysDiff's inside sampling too) in which the humanoid fell; ``recovered_rate``, the share of
+    output motions in which the search carried the body where it would have been put back
+    (``ProjectionConfig.recover``). Empty for modes without P's output."""
     counts = [m.resets for r in results for m in r.motions if m.resets is not None]
     if not counts:
         return {}
     tracked = [t for r in results for t in r.projections.tracked]
     fell = {"fell": 1.0 - float(np.mean(tracked))} if tracked else {}
-    return {"reset_rate": float(np.mean([c > 0 for c in counts])), "resets": float(np.mean(counts))} | fell
+    recovered = [m.recovered or 0 for r in results for m in r.motions if m.resets is not None]
+    return {"reset_rate": float(np.mean([c > 0 for c in counts])), "resets": float(np.mean(counts)),
+            "recovered_rate": float(np.mean([c > 0 for c in recovered]))} | fell
 
 
 def residual_columns(results: Sequence[GenerateResult]) -> dict[str, float]:

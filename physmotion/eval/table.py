@@ -21,7 +21,8 @@ surface (:func:`ground_on_surface`, the constant shift with the least Phys-Err) 
 row is; ``none`` is measured as sampled.
 ``reset_rate`` is the share of output motions whose projection put the fallen humanoid back on the motion
 at least once (MPJPE past tau, 0.15 m in generation) and ``resets`` the mean number of those jumps per
-motion. ``residual_force`` and ``residual_torque`` (with their 95th percentiles) are the root residual P
+motion. ``recovered_rate`` is the share of output motions in which the search carried the body, with no
+outside hand, where it would have been put back (``ProjectionConfig.recover``). ``residual_force`` and ``residual_torque`` (with their 95th percentiles) are the root residual P
 applied to its outputs, the outside help its body got, over every frame, in body weights (x 1 m for the
 torque), and ``residual_at_cap`` the share of frames in which it was held at one of its caps (force, lift
 or torque). Against the ``none`` row's plain samples of the same requests (when it is evaluated):
@@ -70,6 +71,7 @@ BETTER = {"R@1": "↑", "R@2": "↑", "R@3": "↑", "FID": "↓", "MM-Dist": "�
           "sec/motion": "↓"}  # fmt: skip
 RESET_COLUMNS = {"reset_rate": "reset_rate (share)", "resets": "resets (per motion)",
                  "fell": "projections that fell (share)",
+                 "recovered_rate": "carried by the search, not reset (share)",
                  "residual_force": "root force (W)", "residual_force_p95": "root force p95 (W)",
                  "residual_at_cap": "root help at a cap (share)",
                  "flight_kept": "flight kept (median)", "step_jumps": "jumps past the sample's (share)",

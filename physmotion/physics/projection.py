@@ -33,7 +33,7 @@ from physmotion.physics.retarget import joints_to_qpos, qpos_to_joints
 from physmotion.physics.search import SearchConfig, SearchController, search_humanoid
 from physmotion.physics.shaping import ShapingConfig, shape_reference
 from physmotion.physics.surface import body_lowest, pose_frames
-from physmotion.physics.sim import Rollout, simulate
+from physmotion.physics.sim import Recover, Recovery, Rollout, simulate
 from physmotion.physics.tracking import ModelBasedTracker, TrackingConfig, prepare_reference
 from physmotion.physics.workers import map_in_workers, worker_count
 from physmotion.skeleton import NUM_JOINTS
@@ -98,6 +98,14 @@ class ProjectionConfig:
     # (docs/decisions/projection.md: "the search as the tracker's fallback").
     fallback: bool = False
     fallback_flight: float = 0.8
+    # With reset_on_fail: where the tracker (or the policy) would reset the body, the search first tries to
+    # carry it with no outside hand from ``recover_back`` seconds before that step to ``recover_ahead``
+    # seconds after it, starting from the simulation's own state there; only where the search falls too is
+    # the body reset. Costs the search's seconds per second of motion for those stretches alone
+    # (docs/decisions/projection.md: "the search in place of a reset").
+    recover: bool = False
+    recover_back: float = 0.5
+    recover_ahead: float = 0.5
     # A first frame off the path of the next ones (its fastest joint moves into frame 1 more than
     # ``first_frame_margin`` beyond the fastest move of frame 1 -> 2: a denoiser's boundary artefact) is
     # replaced by the pose extrapolated back from frames 1 and 2 before P starts the body there; else the
@@ -123,6 +131,12 @@ class ProjectionConfig:
             raise ShapeError("the search fallback is for the tracker and the policy; the search has none")
         if not self.first_frame_margin >= 0.0:
             raise ShapeError(f"first_frame_margin must be >= 0 metres, got {self.first_frame_margin}")
+        if self.recover and (self.controller == "search" or not self.reset_on_fail):
+            raise ShapeError("recover replaces the tracker's or the policy's resets: it needs reset_on_fail and "
+                             "another controller than the search")
+        if not (0.0 <= self.recover_back <= 5.0 and 0.0 <= self.recover_ahead <= 5.0):
+            raise ShapeError(f"recover_back and recover_ahead must be in 0..5 seconds, got {self.recover_back}, "
+                             f"{self.recover_ahead}")
         if not 0.0 <= self.fallback_flight <= 1.0:
             raise ShapeError(f"fallback_flight must be in 0..1, got {self.fallback_flight}")
 
@@ -136,7 +150,8 @@ class ProjectionConfig:
         if controller == "search":
             humanoid = search_humanoid(humanoid)
         return replace(self, controller=controller, policy=policy, search=search or self.search, humanoid=humanoid,
-                       fallback=self.fallback and controller != "search")  # the search has no fallback
+                       fallback=self.fallback and controller != "search",  # the search has no fallback
+                       recover=self.recover and controller != "search")  # nor anyone to recover it
 
     def residual_bound(self) -> float:
         """The cap on the root residual's force (x body weight) of whoever drives the humanoid: the
@@ -225,6 +240,8 @@ class ProjectedMotion:
     are bounded, that path is not (:func:`~physmotion.physics.sim.control_step`).
     searched: (B,) bool, the search made the motion (``controller`` "search", or as the tracker's
     ``fallback``): no outside hand on it.
+    recovered: (B,) int, stretches the search carried in place of a reset (``ProjectionConfig.recover``);
+    recovered_frames: (B, T) bool, their frames, simulated with no outside hand.
     teacher_obs, teacher_offsets: with the search controller only, per control step of the simulation
     (B, N, 599) float32 the observation a policy would see (:func:`physmotion.physics.policy.observe`, cap
     0) and (B, N, 63) the joint-target offsets the search committed (rad): a policy's teacher labels.
@@ -248,6 +265,8 @@ class ProjectedMotion:
     at_cap: np.ndarray
     reset_frames: np.ndarray
     searched: np.ndarray
+    recovered: np.ndarray
+    recovered_frames: np.ndarray
     teacher_obs: np.ndarray | None = None
     teacher_offsets: np.ndarray | None = None
 
@@ -266,7 +285,8 @@ class ProjectedMotion:
         at = (lambda a: a) if k is None else (lambda a: a[k])
         return SimRecord(int(at(self.resets)), at(self.residual), at(self.residual_peak),
                          at(self.at_cap).astype(bool), at(self.over_limit).astype(bool),
-                         at(self.reset_frames).astype(bool), bool(at(self.searched)))  # fmt: skip
+                         at(self.reset_frames).astype(bool), bool(at(self.searched)),
+                         int(at(self.recovered)))  # fmt: skip
 
 
 @dataclass
@@ -277,7 +297,8 @@ class SimRecord:
     residual per frame, mean and peak (force x W, torque x W x 1 m); at_cap: (T,) bool, a residual update
     held at a cap; over_limit: (T,) bool, a joint's torque past its actuator's limit; reset_frames: (T,)
     bool, frames not simulated (a reset and the cross-fade before it); searched: the search made it
-    (``ProjectionConfig.controller`` or ``fallback``)."""
+    (``ProjectionConfig.controller`` or ``fallback``); recovered: stretches the search carried, with no
+    outside hand, where the humanoid would have been reset (``ProjectionConfig.recover``)."""
 
     resets: int
     residual: np.ndarray
@@ -286,6 +307,7 @@ class SimRecord:
     over_limit: np.ndarray
     reset_frames: np.ndarray
     searched: bool = False
+    recovered: int = 0
 
     def after(self, earlier: SimRecord | None) -> SimRecord:
         """This record of P's output following ``earlier`` P calls on the same motion (PhysDiff's calls in
@@ -294,14 +316,15 @@ class SimRecord:
         if earlier is None:
             return self
         return replace(self, resets=self.resets + earlier.resets, searched=self.searched or earlier.searched,
-                       reset_frames=self.reset_frames | earlier.reset_frames)  # fmt: skip
+                       reset_frames=self.reset_frames | earlier.reset_frames,
+                       recovered=self.recovered + earlier.recovered)  # fmt: skip
 
     def motion_fields(self, cap: float) -> dict:
         """Keyword arguments of :class:`~physmotion.motion.Motion` for this record under a P whose force
         cap is ``cap`` (x W)."""
         return dict(resets=int(self.resets), residual=self.residual, residual_cap=cap, over_limit=self.over_limit,
                     residual_peak=self.residual_peak, residual_at_cap=self.at_cap,
-                    reset_frames=self.reset_frames, searched=self.searched)  # fmt: skip
+                    reset_frames=self.reset_frames, searched=self.searched, recovered=int(self.recovered))  # fmt: skip
 
 
 def as_joints(motion: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -363,7 +386,7 @@ def project(
     joints, batched = as_joints(motion)
     if not fps > 0:
         raise ShapeError(f"fps must be positive, got {fps}")
-    if (cfg.controller == "search" or cfg.fallback) and not cfg.search.threads:  # the search's threads share the cores
+    if (cfg.controller == "search" or cfg.fallback or cfg.recover) and not cfg.search.threads:  # the search's threads share the cores
         inside_worker = multiprocessing.current_process().daemon  # a caller's worker: its siblings use the rest
         per_worker = 1 if inside_worker else max(1, (os.cpu_count() or 1) // worker_count(cfg.workers, len(joints)))
         cfg = replace(cfg, search=replace(cfg.search, threads=per_worker))
@@ -437,7 +460,7 @@ def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig,
         ref = prepare_reference(model, reference, config.humanoid.control_dt, config.tracking)
         roll = simulate(model, ref, tracker, config.humanoid, fail_mpjpe=config.tau,
                         reset_on_fail=config.reset_on_fail, follow_drift=config.follow_drift,
-                        let_land=config.let_land)
+                        let_land=config.let_land, recover=_recovery(model, config) if config.recover else None)
         out = _back_to_input_rate(roll, model, lift, x, fps, ctrl_fps, config.tau, config.reset_on_fail,
                                   grounded, config.crossfade)  # fmt: skip
         score = (not bool(out["success"]), float(out["mpjpe"].mean()))
@@ -491,6 +514,25 @@ def _fallback(tracked: dict[str, np.ndarray], x: np.ndarray, fps: float, config:
     if worse(out) > worse(tracked):
         return tracked
     return {k: v for k, v in out.items() if not k.startswith("teacher_")} | {"searched": np.array(True)}
+
+
+def _recovery(model, config: ProjectionConfig) -> Recover:
+    """``simulate``'s ``recover`` for P: the search (at ``config.search``'s effort, with no outside hand, on the
+    tracker's own body) from ``recover_back`` seconds before a failing step to ``recover_ahead`` seconds after
+    it; None where the search falls too."""
+    rate = 1.0 / config.humanoid.control_dt
+    back, ahead = int(round(config.recover_back * rate)), int(round(config.recover_ahead * rate))
+
+    def recover(ref, states: np.ndarray, k: int, earliest: int) -> Recovery | None:
+        start, stop = max(earliest, k - back), min(len(ref.qpos), k + ahead + 1)
+        search = SearchController(model, replace(config.search, seed=config.search.seed + k), config.humanoid,
+                                  config.tracking)  # fmt: skip
+        roll, record = search.run(ref.window(start, stop), start=states[start])
+        if roll.failed_at is not None:
+            return None
+        return Recovery(start, roll.qpos, record.qvel, roll.mpjpe, roll.contacts)
+
+    return recover
 
 
 def _search_one(prep: PreparedMotion, x: np.ndarray, fps: float, config: ProjectionConfig,
@@ -555,6 +597,8 @@ def _back_to_input_rate(
         "success": np.array(success),
         "selected": np.array(selected),
         "resets": np.array(roll.resets),
+        "recovered": np.array(roll.recovered),
+        "recovered_frames": _per_frame(roll.recovered_steps, owner, nearest, "max") > 0,
         "reset_frames": faded if selected else np.zeros(t, dtype=bool),
         "over_limit": _per_frame(roll.over_limit, owner, nearest, "max") > 0,
     }

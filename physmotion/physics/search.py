@@ -189,12 +189,14 @@ class SearchController:
 
     # --- one episode -----------------------------------------------------------------------------------
     def run(self, ref: Reference, reset_on_fail: bool = False, on_step: Callable[[int, int], None] | None = None,
-            push: np.ndarray | None = None) -> tuple[Rollout, SearchRecord]:  # fmt: skip
+            push: np.ndarray | None = None, start: np.ndarray | None = None) -> tuple[Rollout, SearchRecord]:  # fmt: skip
         """Search along ``ref`` from its first frame. A committed state that has fallen ends the episode
         (``failed_at``, the rest repeating the last state) or, with ``reset_on_fail``, puts the humanoid back
         on the reference there and counts a reset. on_step(done, total): control steps committed.
         push: (6,) added to the root's velocity at the start (linear m/s, angular rad/s, MuJoCo's free-joint
-        velocity): a perturbed start, so that teacher data covers recoveries."""
+        velocity): a perturbed start, so that teacher data covers recoveries.
+        start: (nq + nv,) qpos and qvel to start from instead of the reference's first frame (another
+        controller's state: the search taking over a stretch of its episode, ``sim.simulate``'s ``recover``)."""
         import mujoco
 
         from physmotion.physics.sim import _quiet_mujoco_warnings
@@ -207,6 +209,9 @@ class SearchController:
         goal = SearchGoal(ref, cfg)
         data = mujoco.MjData(model)
         reset_state(model, data, ref)
+        if start is not None:
+            data.qpos[:], data.qvel[:] = start[: model.nq], start[model.nq :]
+            mujoco.mj_forward(model, data)
         if push is not None:
             data.qvel[:6] += push
             mujoco.mj_forward(model, data)

@@ -12,6 +12,7 @@ stepping with the projection.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -42,6 +43,8 @@ class Rollout:
     at_cap: (N,) bool, steps in which some residual update was held at one of the controller's caps
     (force, lift or torque: :meth:`~physmotion.physics.tracking.Controller.caps`).
     reset_steps: (N,) bool, steps at which the humanoid was put back on the reference (``reset_on_fail``).
+    recovered: how many stretches another controller carried in place of a reset (``simulate``'s
+    ``recover``); recovered_steps: (N,) bool, their steps, with no outside hand.
     """
 
     qpos: np.ndarray
@@ -57,6 +60,8 @@ class Rollout:
     residual_torque_peak: np.ndarray | None = None
     at_cap: np.ndarray | None = None  # (N,) bool; None: never (no residual)
     reset_steps: np.ndarray | None = None  # (N,) bool; None: no reset
+    recovered: int = 0
+    recovered_steps: np.ndarray | None = None  # (N,) bool; None: none
 
     def __post_init__(self) -> None:
         n = len(self.qpos)
@@ -68,6 +73,8 @@ class Rollout:
             self.at_cap = np.zeros(n, dtype=bool)
         if self.reset_steps is None:
             self.reset_steps = np.zeros(n, dtype=bool)
+        if self.recovered_steps is None:
+            self.recovered_steps = np.zeros(n, dtype=bool)
 
 
 class StepHelp(NamedTuple):
@@ -113,6 +120,23 @@ def reset_state(model, data, ref: Reference, frame: int = 0) -> None:
     mujoco.mj_forward(model, data)
 
 
+@dataclass
+class Recovery:
+    """Control steps ``start`` .. ``start`` + len(qpos) - 1 carried by another controller with no outside
+    hand, in place of a reset (``simulate``'s ``recover``): qpos (M, nq), qvel (M, nv), mpjpe (M,) metres to
+    the reference, contacts (M, 4) bool, as :class:`Rollout` holds them."""
+
+    start: int
+    qpos: np.ndarray
+    qvel: np.ndarray
+    mpjpe: np.ndarray
+    contacts: np.ndarray
+
+
+# recover(ref, states (k + 1, nq + nv) of steps 0..k, k, earliest start) -> a Recovery ending after k, or None
+Recover = Callable[[Reference, np.ndarray, int, int], "Recovery | None"]
+
+
 def simulate(
     model,
     ref: Reference,
@@ -122,6 +146,7 @@ def simulate(
     reset_on_fail: bool = False,
     follow_drift: bool = False,
     let_land: bool = False,
+    recover: Recover | None = None,
 ) -> Rollout:
     """Run ``controller`` along ``ref`` (at the control rate of ``config``) from the reference's start.
 
@@ -134,7 +159,11 @@ def simulate(
     lags behind): the rest of the reference is moved to it instead, and nothing jumps. With ``let_land``
     too, a body *below* the reference whose pose is within ``fail_mpjpe`` once its whole offset is taken
     out has fallen short of a flight (a jump's push came up short): the horizontal offset is followed as
-    above and the body lands, where a reset would lift it into the air.
+    above and the body lands, where a reset would lift it into the air. With ``recover`` too, a step that
+    would be reset is first handed to it: given the states so far, it may carry the body from an earlier
+    step to a later one (the search with no outside hand), and the episode goes on from there; a stretch
+    it returned is not handed to it again, and where it returns None the reset happens as before
+    (``recovered`` counts the stretches, ``recovered_steps`` marks them).
     """
     import mujoco
 
@@ -145,15 +174,19 @@ def simulate(
     foot_bodies = lay.body_ids[list(FOOT_JOINTS)]  # (4,) in the order of Rollout.contacts
     n = len(ref.qpos)
     qpos = np.zeros((n, model.nq))
+    states = np.zeros((n, model.nq + model.nv)) if recover is not None else None
     mpjpe = np.zeros(n)
     res_f, res_t = np.zeros(n), np.zeros(n)
     peak_f, peak_t = np.zeros(n), np.zeros(n)
     over, at_cap, reset_steps = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+    recovered_steps = np.zeros(n, dtype=bool)
     contacts = np.zeros((n, 4), dtype=bool)
     weight = float(model.body_subtreemass[0]) * STANDARD_GRAVITY
     reset_state(model, data, ref)
-    failed_at, resets, shifts = None, 0, 0
-    for k in range(n):
+    failed_at, resets, shifts, recovered = None, 0, 0, 0
+    earliest = 0  # the first step a recovery may start from: none goes back over an earlier one
+    k = 0
+    while True:
         qpos[k] = data.qpos
         mpjpe[k] = mpjpe_of(data, lay, ref.joints_mj[k])
         offset = None
@@ -164,13 +197,31 @@ def simulate(
                 mpjpe[k] = mpjpe_of(data, lay, ref.joints_mj[k])
                 shifts += 1
         contacts[k] = contacts_of(model, data, foot_bodies)
+        if states is not None:
+            states[k] = np.concatenate([data.qpos, data.qvel])
         if mpjpe[k] > fail_mpjpe and reset_on_fail and offset is None:
+            got = recover(ref, states[: k + 1], k, earliest) if recover is not None and k > earliest else None
+            if got is not None:
+                s, e = got.start, got.start + len(got.qpos) - 1
+                qpos[s : e + 1], mpjpe[s : e + 1], contacts[s : e + 1] = got.qpos, got.mpjpe, got.contacts
+                for a in (res_f, res_t, peak_f, peak_t):
+                    a[s + 1 : e + 1] = 0.0  # no outside hand while it carries the body
+                over[s + 1 : e + 1] = at_cap[s + 1 : e + 1] = False
+                recovered_steps[s : e + 1] = True
+                recovered += 1
+                data.qpos[:], data.qvel[:] = got.qpos[-1], got.qvel[-1]
+                mujoco.mj_forward(model, data)
+                k = earliest = e
+                continue
             failed_at = k if failed_at is None else failed_at
             resets += 1
             reset_steps[k] = True
             reset_state(model, data, ref, k)
             qpos[k] = data.qpos
             mpjpe[k] = mpjpe_of(data, lay, ref.joints_mj[k])
+            earliest = k
+            if states is not None:
+                states[k] = np.concatenate([data.qpos, data.qvel])
         elif mpjpe[k] > fail_mpjpe and not reset_on_fail:
             failed_at = k
             qpos[k:] = data.qpos
@@ -181,8 +232,9 @@ def simulate(
         step = control_step(model, data, ref, controller, k, cfg, weight)
         res_f[k + 1], res_t[k + 1], over[k + 1] = step.force, step.torque, step.over_limit
         peak_f[k + 1], peak_t[k + 1], at_cap[k + 1] = step.force_peak, step.torque_peak, step.at_cap
+        k += 1
     return Rollout(qpos, mpjpe, res_f, res_t, contacts, failed_at, resets, shifts, over, peak_f, peak_t, at_cap,
-                   reset_steps)  # fmt: skip
+                   reset_steps, recovered, recovered_steps)  # fmt: skip
 
 
 def control_step(

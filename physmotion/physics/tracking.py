@@ -88,6 +88,11 @@ class Reference:
             self._root[substeps] = _root_targets(self, substeps)
         return self._root[substeps]
 
+    def window(self, start: int, stop: int) -> Reference:
+        """Control steps start..stop-1 of this reference, as a reference of their own."""
+        return Reference(qpos=self.qpos[start:stop], qvel=self.qvel[start:stop],
+                         joints_mj=self.joints_mj[start:stop], tau_ff=self.tau_ff[start:stop])  # fmt: skip
+
     def shifted(self, step: int, offset: np.ndarray, substeps: int) -> Reference:
         """A copy whose control steps from ``step`` on are moved horizontally by ``offset`` (2,), MuJoCo
         x/y; the root targets of ``substeps`` per control step move with them."""
