@@ -241,7 +241,7 @@ class ProjectedMotion:
     searched: (B,) bool, the search made the motion (``controller`` "search", or as the tracker's
     ``fallback``): no outside hand on it.
     recovered: (B,) int, stretches the search carried in place of a reset (``ProjectionConfig.recover``);
-    recovered_frames: (B, T) bool, their frames, simulated with no outside hand.
+    recovered_frames: (B, T) bool, frames all of whose control steps the search simulated: no outside hand.
     teacher_obs, teacher_offsets: with the search controller only, per control step of the simulation
     (B, N, 599) float32 the observation a policy would see (:func:`physmotion.physics.policy.observe`, cap
     0) and (B, N, 63) the joint-target offsets the search committed (rad): a policy's teacher labels.
@@ -598,7 +598,7 @@ def _back_to_input_rate(
         "selected": np.array(selected),
         "resets": np.array(roll.resets),
         "recovered": np.array(roll.recovered),
-        "recovered_frames": _per_frame(roll.recovered_steps, owner, nearest, "max") > 0,
+        "recovered_frames": _per_frame(roll.recovered_steps, owner, nearest, "mean") > 1.0 - 1e-9,
         "reset_frames": faded if selected else np.zeros(t, dtype=bool),
         "over_limit": _per_frame(roll.over_limit, owner, nearest, "max") > 0,
     }

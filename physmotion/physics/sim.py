@@ -44,7 +44,8 @@ class Rollout:
     (force, lift or torque: :meth:`~physmotion.physics.tracking.Controller.caps`).
     reset_steps: (N,) bool, steps at which the humanoid was put back on the reference (``reset_on_fail``).
     recovered: how many stretches another controller carried in place of a reset (``simulate``'s
-    ``recover``); recovered_steps: (N,) bool, their steps, with no outside hand.
+    ``recover``); recovered_steps: (N,) bool, the steps it simulated (each from the state before it), with no
+    outside hand.
     """
 
     qpos: np.ndarray
@@ -207,7 +208,7 @@ def simulate(
                 for a in (res_f, res_t, peak_f, peak_t):
                     a[s + 1 : e + 1] = 0.0  # no outside hand while it carries the body
                 over[s + 1 : e + 1] = at_cap[s + 1 : e + 1] = False
-                recovered_steps[s : e + 1] = True
+                recovered_steps[s + 1 : e + 1] = True  # the steps it simulated, from the state at s
                 recovered += 1
                 data.qpos[:], data.qvel[:] = got.qpos[-1], got.qvel[-1]
                 mujoco.mj_forward(model, data)

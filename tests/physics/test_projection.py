@@ -327,6 +327,41 @@ def test_the_search_takes_over_a_jump_the_tracker_flattens(mocap_dir) -> None:
     assert not searched.residual.any() and not searched.at_cap.any() and not searched.over_limit.any()
 
 
+@pytest.mark.slow
+def test_the_search_carries_a_falling_body_instead_of_a_reset() -> None:
+    """The shipped model's plain sample of a hop (seed 2, 4 s): generation's tracker falls in it and puts the
+    body back twice (measured); with ``recover`` the search carries the body over the fall (about 1 s) with
+    no outside hand, and nothing is reset. Where it carried, no residual was applied; elsewhere the output is
+    the tracker's."""
+    from physmotion.diffusion.model import MotionDiffusion
+    from physmotion.diffusion.physdiff import on_data_floor
+    from physmotion.generate import GenerateConfig, generate
+
+    sample = generate(["a child hops around happily"], GenerateConfig(seconds=4.0, physics="none", seed=2),
+                      model=MotionDiffusion.load()).motions[0].joints  # fmt: skip
+    x = on_data_floor(sample)
+    reset = project(x, config=ProjectionConfig.sampling())
+    carried = project(x, config=ProjectionConfig.sampling(recover=True))
+    frames = np.flatnonzero(carried.recovered_frames)
+    print(f"\nresets {reset.resets} -> {carried.resets}; carried {carried.recovered} time(s), frames {frames}")
+    assert reset.resets >= 1 and reset.recovered == 0 and not reset.recovered_frames.any()
+    assert carried.resets == 0 and carried.recovered >= 1 and carried.success
+    assert 10 <= len(frames) <= 30  # 0.5 s either side of the fall, at 20 fps
+    assert not carried.residual[frames].any() and not carried.at_cap[frames].any()
+    assert not carried.reset_frames.any()
+    before = slice(0, max(0, frames[0] - 1))  # the tracker's frames before the stretch are untouched
+    np.testing.assert_array_equal(carried.joints[before], reset.joints[before])
+
+
+def test_recover_is_for_the_tracker_with_resets() -> None:
+    with pytest.raises(ShapeError, match="recover"):
+        ProjectionConfig(controller="search", reset_on_fail=True, recover=True)
+    with pytest.raises(ShapeError, match="recover"):
+        ProjectionConfig(recover=True)  # no reset to replace
+    with pytest.raises(ShapeError, match="recover_back"):
+        ProjectionConfig.sampling(recover_back=-1.0)
+
+
 def test_the_fallback_is_for_the_tracker() -> None:
     with pytest.raises(ShapeError, match="fallback"):
         ProjectionConfig(controller="search", fallback=True)
