@@ -119,6 +119,38 @@ def test_the_search_fallback_is_recorded_where_it_took_over(tiny_model, tmp_path
     assert not motion.residual.any() and not motion.residual_at_cap.any()
 
 
+@pytest.mark.slow
+def test_the_stretches_the_search_carried_are_recorded(tmp_path: Path) -> None:
+    """The shipped model's hop of tests/physics/test_projection.py, generated with one P: the tracker resets
+    it; with ``recover`` fewer resets, and the stretches the search carried counted in the motion, the .npz,
+    generate.json and the summary; without ``recover`` the same request counts resets and no stretch."""
+    from physmotion.diffusion.model import MotionDiffusion
+    from physmotion.generate import physics_summary
+    from physmotion.physics.projection import ProjectionConfig
+
+    net = MotionDiffusion.load()
+    cfg = GenerateConfig(seconds=4.0, physics="post:1", seed=2, projection=ProjectionConfig.sampling(recover=True))
+    result = generate(["a child hops around happily"], cfg, net)
+    plain = generate(["a child hops around happily"], cfg.with_search_recovery(False), net)
+    write_outputs(result, tmp_path / "out", cfg, preview=False)
+    (run,) = json.loads((tmp_path / "out" / "generate.json").read_text())["runs"]
+    (entry,), (motion,) = run["motions"], result.motions
+    back = Motion.load(tmp_path / "out" / entry["files"][0])
+    print(f"\nrecovered {motion.recovered}, resets {motion.resets} (without: {plain.motions[0].resets}); "
+          f"{physics_summary(result)}")
+    # measured: 2 resets without; with recover 2 stretches carried and 1 reset left (where the search fell too)
+    assert plain.motions[0].resets >= 1 and plain.motions[0].recovered == 0
+    assert motion.resets < plain.motions[0].resets and motion.recovered >= 1
+    assert entry["recovered"] == back.recovered == motion.recovered and run["settings"]["projection"]["search_recover"]
+    assert f"carried the body {motion.recovered} time(s)" in physics_summary(result)
+
+
+def test_recover_is_refused_with_the_search_controller(tmp_path: Path) -> None:
+    res = run("generate", "a person jumps", "-o", tmp_path / "o", "--controller", "search", "--recover")
+    assert res.returncode == 1 and "--recover is for the tracker" in res.stderr
+    assert "Traceback" not in res.stderr and not (tmp_path / "o").exists()
+
+
 @pytest.mark.parametrize(
     ("texts", "config", "message"),
     [
@@ -315,7 +347,7 @@ def test_console_script_generate_morph_writes_the_same_files(tmp_path: Path) -> 
     run_log = json.loads((tmp_path / "morph" / "generate.json").read_text())["runs"][-1]
     assert run_log["settings"]["physics"] == "morph"
     assert run_log["settings"]["morph_projection"] == {"reset_on_fail": False, "tau": 0.5, "sim_dt": 1 / 360,
-                                                       "search_fallback": False}
+                                                       "search_fallback": False, "search_recover": False}
     assert run_log["projections"]["imitation_failures"] in (0, 1)
     assert 0.0 <= run_log["projections"]["imitation_failure_rate"] <= 1.0
     assert isinstance(run_log["motions"][0]["imitation_failed"], bool)

@@ -113,6 +113,9 @@ def test_the_help_in_full_and_the_reset_frames_travel_with_the_motion(tmp_path: 
     assert back.searched is None  # not given: not recorded
     Motion(_standing(), residual=np.zeros((10, 2)), resets=0, searched=True).save(tmp_path / "s.npz")
     assert Motion.load(tmp_path / "s.npz").searched is True
+    assert back.recovered is None  # not given: not recorded
+    Motion(_standing(), residual=np.zeros((10, 2)), resets=0, recovered=2).save(tmp_path / "r.npz")
+    assert Motion.load(tmp_path / "r.npz").recovered == 2
     np.testing.assert_array_equal(back.residual_peak, peak.astype(np.float32))
     np.testing.assert_array_equal(back.residual_at_cap, at_cap)
     np.testing.assert_array_equal(back.reset_frames, reset)

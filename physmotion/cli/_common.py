@@ -102,7 +102,7 @@ SEARCH_FALLBACK_HELP = ("Where the tracker (or the policy) falls and is reset, o
                         "those motions (results/flight_kept_fallback.md) (default: off).")
 RECOVER_HELP = ("Where the tracker (or the policy) falls, let the search carry the body with no outside hand "
                 "from 0.5 s before to 0.5 s after, before resetting it onto the motion; seconds of CPU per "
-                "stretch carried (results/recover.md)")
+                "stretch carried (results/recover_jumps.md) (default: off).")
 POLICY_HELP = ("With --controller policy: the policy folder (the shipped one if left out). With --controller search: a "
                "policy that proposes each window's first mean (amortized search, `train student`).")
 PREVIEW_HELP = ("Write a GIF preview beside the output, <stem>.gif (under a second for a 6 s motion; "
