@@ -22,10 +22,10 @@ row is; ``none`` is measured as sampled.
 ``reset_rate`` is the share of output motions whose projection put the fallen humanoid back on the motion
 at least once (MPJPE past tau, 0.15 m in generation) and ``resets`` the mean number of those jumps per
 motion. ``recovered_rate`` is the share of output motions in which the search carried the body, with no
-outside hand, where it would have been put back (``ProjectionConfig.recover``). ``residual_force`` and ``residual_torque`` (with their 95th percentiles) are the root residual P
-applied to its outputs, the outside help its body got, over every frame, in body weights (x 1 m for the
-torque), and ``residual_at_cap`` the share of frames in which it was held at one of its caps (force, lift
-or torque). Against the ``none`` row's plain samples of the same requests (when it is evaluated):
+outside hand, where it would have been put back (``ProjectionConfig.recover``). ``residual_force`` and
+``residual_torque`` (with their 95th percentiles) are the root residual P applied to its outputs, the outside
+help its body got, over every frame, in body weights (x 1 m for the torque), and ``residual_at_cap`` the
+share of frames in which it was held at one of its caps (force, lift or torque). Against the ``none`` row's plain samples of the same requests (when it is evaluated):
 ``flight_kept``, the median share of a flying sample's flight the output keeps, and ``step_jumps``, the
 share of outputs with a frame-to-frame jump 2 cm beyond the sample's largest
 (:mod:`physmotion.metrics.dynamics`): Phys-Err alone rewards a flattened jump. In every mode with P,
