@@ -217,8 +217,13 @@ def _twist_series(psi: np.ndarray, w: np.ndarray, period: float, limit: float) -
         for i in range(1, len(samples)):
             samples[i] = near(samples[i], samples[i - 1])
         base = np.interp(np.arange(len(psi)), known, samples)
+    # Where the bend only partly shows the twist, follow the measured offset from the base the less the
+    # further it is: half a period away the measurement is as near one way round as the other, and a plain
+    # blend flips there (docs/decisions/projection.md: "the limb twist where a bend half shows it").
+    d = near(psi, base) - base
+    d = d * 0.5 * (1.0 + np.cos(2.0 * np.pi * d / period))
     # Clip last: clipping before unwrapping would let a twist beyond the limit jump to the other end.
-    return np.clip(w * near(psi, base) + (1.0 - w) * base, -limit, limit)
+    return np.clip(base + w * d, -limit, limit)
 
 
 def _anatomical_twist(joints: np.ndarray, local: np.ndarray, offsets: np.ndarray) -> np.ndarray:

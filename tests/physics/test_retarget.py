@@ -127,6 +127,21 @@ def test_angles_stay_continuous_through_flips() -> None:
     assert np.all(np.sum(quat[1:] * quat[:-1], -1) > 0.9)  # one hemisphere, no sign flips
 
 
+def test_an_arm_bent_slightly_backwards_keeps_its_twist() -> None:
+    """An elbow bent 10 degrees the wrong way (generated arms are often a little over-straight), its bend
+    axis a degree either side of straight backwards from frame to frame: the upper arm is not turned
+    from one end of its twist range to the other (measured before the fix: 100 degrees in one frame)."""
+    frames = 40
+    rot, root = gait_rotations(frames)
+    wobble = np.radians(np.where(np.arange(frames) % 2 == 0, 1.0, -1.0))
+    rotvec = np.stack([np.zeros(frames), np.full(frames, np.radians(10.0)), wobble], -1)
+    rot[:, JOINT_INDEX["left_elbow"]] = Rotation.from_rotvec(rotvec).as_matrix()
+    joints = forward_kinematics(rot, root, REST_OFFSETS)
+    qpos = joints_to_qpos(joints, REST_OFFSETS)
+    assert _max_err(qpos_to_joints(qpos, REST_OFFSETS), joints) < 1e-6
+    assert _jump(qpos) < np.radians(20.0)
+
+
 def test_real_walk_round_trip_and_continuity(real_walk: np.ndarray, default_model) -> None:
     """Bandai's normal walk through physmotion.io.importer (needs the importer)."""
     model = build_model(offsets_from_joints(real_walk))
