@@ -196,13 +196,14 @@ def _global(local: np.ndarray) -> np.ndarray:
     return glob
 
 
-def _twist_series(psi: np.ndarray, w: np.ndarray, period: float, limit: float) -> np.ndarray:
+def _twist_series(psi: np.ndarray, w: np.ndarray, period: float, limit: float, fade_far: bool = False) -> np.ndarray:
     """Twist per frame (T,) from the measured twist psi (T,) and how much the bend shows it, w (T,).
 
     Where the limb is bent (w = 1) the measured twist holds; across straight frames (w = 0, the bend
     axis is noise there) it is interpolated in time between its neighbours (held at the ends; 0 if the
     limb never bends), and blended in between. Unwrapped with ``period``, clipped to +-limit:
-    continuous wherever the measurement is.
+    continuous wherever the measurement is. fade_far: in the blend, follow a measurement far from the
+    interpolated twist less (see below).
     """
 
     def near(x: np.ndarray, ref: np.ndarray | float) -> np.ndarray:
@@ -217,11 +218,14 @@ def _twist_series(psi: np.ndarray, w: np.ndarray, period: float, limit: float) -
         for i in range(1, len(samples)):
             samples[i] = near(samples[i], samples[i - 1])
         base = np.interp(np.arange(len(psi)), known, samples)
-    # Where the bend only partly shows the twist, follow the measured offset from the base the less the
-    # further it is: half a period away the measurement is as near one way round as the other, and a plain
-    # blend flips there (docs/decisions/projection.md: "the limb twist where a bend half shows it").
     d = near(psi, base) - base
-    d = d * 0.5 * (1.0 + np.cos(2.0 * np.pi * d / period))
+    if fade_far:
+        # Where the bend only partly shows the twist, follow the measured offset from the base up to a quarter
+        # period, and less beyond, none at half a period: there the measurement is as near one way round as
+        # the other, and a plain blend flips (docs/decisions/projection.md: "the limb twist where a bend half
+        # shows it"; arms only, as measured there).
+        fade = np.clip(2.0 - 4.0 * np.abs(d) / period, 0.0, 1.0)
+        d = d * fade * fade * (3.0 - 2.0 * fade)
     # Clip last: clipping before unwrapping would let a twist beyond the limit jump to the other end.
     return np.clip(base + w * d, -limit, limit)
 
@@ -247,7 +251,7 @@ def _anatomical_twist(joints: np.ndarray, local: np.ndarray, offsets: np.ndarray
         if max_twist is None:  # knee: the axis line matters, not its sign (period pi)
             psi = _twist_series(psi, w, np.pi, 0.5 * np.pi)
         else:
-            psi = _twist_series(psi, w, 2.0 * np.pi, max_twist)
+            psi = _twist_series(psi, w, 2.0 * np.pi, max_twist, fade_far=True)
         twist = _axis_angle(np.broadcast_to(a, (len(psi), 3)), psi)
         local[:, p] = local[:, p] @ twist
         glob[:, p] = glob[:, PARENTS[p]] @ local[:, p]
