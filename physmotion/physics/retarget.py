@@ -196,7 +196,9 @@ def _global(local: np.ndarray) -> np.ndarray:
     return glob
 
 
-def _twist_series(psi: np.ndarray, w: np.ndarray, period: float, limit: float, fade_far: bool = False) -> np.ndarray:
+def _twist_series(
+    psi: np.ndarray, w: np.ndarray, period: float, limit: float, fade_far: bool = False
+) -> np.ndarray:
     """Twist per frame (T,) from the measured twist psi (T,) and how much the bend shows it, w (T,).
 
     Where the limb is bent (w = 1) the measured twist holds; across straight frames (w = 0, the bend
