@@ -226,9 +226,9 @@ def test_captured_runs_keep_their_airborne_share(mocap_dir) -> None:
     """Every 4th run of the mocap (14 of 53 by caption category): the simulated runners are airborne about
     as often as the captured ones, where the tracker as it was flew in twice as many frames. These 14:
     airborne 14 -> 24 % (the issue allows 10 points: 9.6 here, 9.3 over all 53 runs), Float 8.7 -> 11.2
-    mm (re-measured after the arms' twist fix of 2026-11-30: 10.2, 9.5 and 11.9 before). Over all 53 runs
-    the issue's Float target (input + 2 mm) misses by 2.2 mm (results/projection_dynamic.md), so it is
-    checked at + 3.5 mm here and the share at 11 points."""
+    mm (re-measured after the arms' twist fix, decisions/projection.md: 10.2, 9.5 and 11.9 before). Over all
+    53 runs the issue's Float target (input + 2 mm) misses by 2.2 mm (results/projection_dynamic.md), so it
+    is checked at + 3.5 mm here and the share at 11 points."""
     from experiments.projection_quality import category, measure_clips, summarize
     from physmotion.io.importer import load_manifest
 
