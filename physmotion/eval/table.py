@@ -25,13 +25,15 @@ motion. ``recovered_rate`` is the share of output motions in which the search ca
 outside hand, where it would have been put back (``ProjectionConfig.recover``). ``residual_force`` and
 ``residual_torque`` (with their 95th percentiles) are the root residual P applied to its outputs, the outside
 help its body got, over every frame, in body weights (x 1 m for the torque), and ``residual_at_cap`` the
-share of frames in which it was held at one of its caps (force, lift or torque). Against the ``none`` row's plain samples of the same requests (when it is evaluated):
-``flight_kept``, the median share of a flying sample's flight the output keeps, and ``step_jumps``, the
-share of outputs with a frame-to-frame jump 2 cm beyond the sample's largest
+share of frames in which it was held at one of its caps (force, lift or torque). Against the ``none`` row's
+plain samples of the same requests (when it is evaluated): ``flight_kept``, the median share of a flying
+sample's flight the output keeps, and ``step_jumps``, the share of outputs with a frame-to-frame jump 2 cm
+beyond the sample's largest
 (:mod:`physmotion.metrics.dynamics`): Phys-Err alone rewards a flattened jump. In every mode with P,
 ``step_jumps_p``: the same against what the last P was given, so the jumps P made apart from a faster
-motion PhysDiff's denoising made after an earlier P. None is Morph's imitation failure rate: ``imitation_failure_rate``, given for the ``morph`` mode, is
-the share of its motions whose imitation failed (MPJPE past 0.5 m), so that the sampled motion was kept.
+motion PhysDiff's denoising made after an earlier P. None is Morph's imitation failure rate:
+``imitation_failure_rate``, given for the ``morph`` mode, is the share of its motions whose imitation failed
+(MPJPE past 0.5 m), so that the sampled motion was kept.
 """
 
 from __future__ import annotations
