@@ -51,12 +51,12 @@ def _variant(name: str):
         return replace(base, tracking=replace(base.tracking, residual_lift=0.3))
     if name == "fallback":  # the search where the tracker resets, fails or keeps under 0.8 of the flight
         return replace(base, fallback=True)
-    if name == "recover":  # the search carries the body where the tracker would reset it
-        return replace(base, recover=True)
+    if name == "no_recover":  # the tracker resets the body at once where it falls (the default before recover)
+        return replace(base, recover=False)
     raise ValueError(f"unknown variant {name!r}")
 
 
-VARIANTS = ("sampling", "ballistic", "no_land", "ballistic_no_land", "lift_0.3", "fallback", "recover")
+VARIANTS = ("sampling", "ballistic", "no_land", "ballistic_no_land", "lift_0.3", "fallback", "no_recover")
 
 
 def _cpu_wall() -> np.ndarray:

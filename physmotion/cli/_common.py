@@ -101,8 +101,9 @@ SEARCH_FALLBACK_HELP = ("Where the tracker (or the policy) falls and is reset, o
                         "outside hand, jumps keep their flight, for seconds of CPU per second of motion on "
                         "those motions (results/flight_kept_fallback.md) (default: off).")
 RECOVER_HELP = ("Where the tracker (or the policy) falls, let the search carry the body with no outside hand "
-                "from 0.5 s before to 0.5 s after, before resetting it onto the motion; seconds of CPU per "
-                "stretch carried (results/recover_jumps.md) (default: off).")
+                "from 0.5 s before to 0.5 s after (1 s before where it falls too), before resetting it onto "
+                "the motion; seconds of CPU per stretch carried (results/recover_jumps.md). --no-recover "
+                "resets at once: faster on motions that fall (default: on).")
 POLICY_HELP = ("With --controller policy: the policy folder (the shipped one if left out). With --controller search: a "
                "policy that proposes each window's first mean (amortized search, `train student`).")
 PREVIEW_HELP = ("Write a GIF preview beside the output, <stem>.gif (under a second for a 6 s motion; "

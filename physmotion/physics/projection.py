@@ -102,10 +102,12 @@ class ProjectionConfig:
     # carry it with no outside hand from ``recover_back`` seconds before that step to ``recover_ahead``
     # seconds after it, starting from the simulation's own state there; only where the search falls too is
     # the body reset. Costs the search's seconds per second of motion for those stretches alone
-    # (docs/decisions/projection.md: "the search in place of a reset").
+    # (docs/decisions/projection.md: "the search in place of a reset"). Where the search falls, it tries
+    # once more from ``recover_retry_back`` seconds before the step (0: no second try), before the reset.
     recover: bool = False
     recover_back: float = 0.5
     recover_ahead: float = 0.5
+    recover_retry_back: float = 1.0
     # A first frame off the path of the next ones (its fastest joint moves into frame 1 more than
     # ``first_frame_margin`` beyond the fastest move of frame 1 -> 2: a denoiser's boundary artefact) is
     # replaced by the pose extrapolated back from frames 1 and 2 before P starts the body there; else the
@@ -134,9 +136,10 @@ class ProjectionConfig:
         if self.recover and (self.controller == "search" or not self.reset_on_fail):
             raise ShapeError("recover replaces the tracker's or the policy's resets: it needs reset_on_fail and "
                              "another controller than the search")
-        if not (0.0 <= self.recover_back <= 5.0 and 0.0 <= self.recover_ahead <= 5.0):
-            raise ShapeError(f"recover_back and recover_ahead must be in 0..5 seconds, got {self.recover_back}, "
-                             f"{self.recover_ahead}")
+        spans = (self.recover_back, self.recover_ahead, self.recover_retry_back)
+        if not all(0.0 <= s <= 5.0 for s in spans):
+            raise ShapeError("recover_back, recover_ahead and recover_retry_back must be in 0..5 seconds, got "
+                             + ", ".join(f"{s:g}" for s in spans))
         if not 0.0 <= self.fallback_flight <= 1.0:
             raise ShapeError(f"fallback_flight must be in 0..1, got {self.fallback_flight}")
 
@@ -184,7 +187,11 @@ class ProjectionConfig:
         A generated frame often hovers a centimetre or two over the floor, so the swing feet are lifted
         against the frame's lowest point (``ShapingConfig.hover_support``; docs/decisions/sampling.md:
         "support judged against a hovering frame in the sampling preset"); the plain projection keeps the
-        floor rule, which captured runs read better."""
+        floor rule, which captured runs read better.
+
+        Where the tracker falls, the search first carries the body with no outside hand (``recover``), so
+        that an output is simulated throughout rather than put back on the motion; it costs the search's
+        seconds for those stretches alone (docs/decisions/projection.md: "the search in place of a reset")."""
         defaults = {
             "reset_on_fail": True,
             "tau": 0.15,
@@ -192,6 +199,7 @@ class ProjectionConfig:
             "humanoid": HumanoidConfig(residual_every=4),
             "shaping": ShapingConfig(ballistic_flight=False, hover_support=0.05),
             "mend_first_frame": True,
+            "recover": True,
         }
         return cls(**{**defaults, **overrides})
 
@@ -519,18 +527,27 @@ def _fallback(tracked: dict[str, np.ndarray], x: np.ndarray, fps: float, config:
 def _recovery(model, config: ProjectionConfig) -> Recover:
     """``simulate``'s ``recover`` for P: the search (at ``config.search``'s effort, with no outside hand, on the
     tracker's own body) from ``recover_back`` seconds before a failing step to ``recover_ahead`` seconds after
-    it; None where the search falls too."""
+    it; where it falls, once more from ``recover_retry_back`` seconds before (an earlier start leaves it more
+    time to steer the body); None where the search falls every time."""
     rate = 1.0 / config.humanoid.control_dt
-    back, ahead = int(round(config.recover_back * rate)), int(round(config.recover_ahead * rate))
+    backs = [config.recover_back] + ([config.recover_retry_back] if config.recover_retry_back else [])
+    backs = [int(round(b * rate)) for b in backs]
+    ahead = int(round(config.recover_ahead * rate))
 
     def recover(ref, states: np.ndarray, k: int, earliest: int) -> Recovery | None:
-        start, stop = max(earliest, k - back), min(len(ref.qpos), k + ahead + 1)
-        search = SearchController(model, replace(config.search, seed=config.search.seed + k), config.humanoid,
-                                  config.tracking)  # fmt: skip
-        roll, record = search.run(ref.window(start, stop), start=states[start])
-        if roll.failed_at is not None:
-            return None
-        return Recovery(start, roll.qpos, record.qvel, roll.mpjpe, roll.contacts)
+        stop = min(len(ref.qpos), k + ahead + 1)
+        tried = set()
+        for back in backs:
+            start = max(earliest, k - back)
+            if start in tried:  # the earlier try started there already: the same search again
+                continue
+            tried.add(start)
+            search = SearchController(model, replace(config.search, seed=config.search.seed + k), config.humanoid,
+                                      config.tracking)  # fmt: skip
+            roll, record = search.run(ref.window(start, stop), start=states[start])
+            if roll.failed_at is None:
+                return Recovery(start, roll.qpos, record.qvel, roll.mpjpe, roll.contacts)
+        return None
 
     return recover
 

@@ -164,7 +164,8 @@ def simulate(
     would be reset is first handed to it: given the states so far, it may carry the body from an earlier
     step to a later one (the search with no outside hand), and the episode goes on from there; a stretch
     it returned is not handed to it again, and where it returns None the reset happens as before
-    (``recovered`` counts the stretches, ``recovered_steps`` marks them).
+    (``recovered`` counts the stretches, ``recovered_steps`` marks them). A stretch it carried to the last
+    step is kept whatever its error there.
     """
     import mujoco
 
@@ -200,8 +201,12 @@ def simulate(
         contacts[k] = contacts_of(model, data, foot_bodies)
         if states is not None:
             states[k] = np.concatenate([data.qpos, data.qvel])
-        if mpjpe[k] > fail_mpjpe and reset_on_fail and offset is None:
-            got = recover(ref, states[: k + 1], k, earliest) if recover is not None and k > earliest else None
+        # A stretch the recovery carried to the last step stands: its controller judges a fall, not the error.
+        carried_to_end = k == n - 1 and recovered_steps[k]
+        if mpjpe[k] > fail_mpjpe and reset_on_fail and offset is None and not carried_to_end:
+            # A body handed back still off the motion goes on with the search from where it was handed back.
+            again = recover is not None and (k > earliest or recovered_steps[k])
+            got = recover(ref, states[: k + 1], k, earliest) if again else None
             if got is not None:
                 s, e = got.start, got.start + len(got.qpos) - 1
                 qpos[s : e + 1], mpjpe[s : e + 1], contacts[s : e + 1] = got.qpos, got.mpjpe, got.contacts

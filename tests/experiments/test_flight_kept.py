@@ -17,6 +17,7 @@ def test_every_variant_is_the_sampling_preset_with_one_change() -> None:
     for name in VARIANTS[1:]:
         assert _variant(name) != base, name
     assert _variant("fallback").fallback and not base.fallback
+    assert base.recover and not _variant("no_recover").recover
     with pytest.raises(ValueError, match="unknown variant"):
         _variant("bogus")
 

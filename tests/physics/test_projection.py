@@ -121,11 +121,12 @@ def test_follow_drift_moves_the_motion_to_a_body_that_drifted(walk: np.ndarray) 
     """A walk whose root travels 2.5 times as far as its steps carry it (its feet slide, as generated
     motions' do): the body falls behind. Reset onto the motion, it jumps; followed, it walks on. In the
     sampling preset, the one that resets: with the plain projection's 0.2 W residual the followed body
-    fell behind by more than its pose allowed and was reset once too."""
+    fell behind by more than its pose allowed and was reset once too. (The tracker's own rules: the
+    search's recovery is off.)"""
     root = walk[:, 0, :] - walk[0, 0, :]
     sliding = walk + 1.5 * root[:, None, :] * np.array([1.0, 0.0, 1.0])
-    reset = project(sliding, config=ProjectionConfig.sampling(tau=0.3, follow_drift=False))
-    followed = project(sliding, config=ProjectionConfig.sampling(tau=0.3))
+    reset = project(sliding, config=ProjectionConfig.sampling(tau=0.3, follow_drift=False, recover=False))
+    followed = project(sliding, config=ProjectionConfig.sampling(tau=0.3, recover=False))
     step = {name: np.linalg.norm(np.diff(out.simulated[:, 0], axis=0), axis=-1).max()
             for name, out in (("reset", reset), ("followed", followed))}  # fmt: skip
     print(f"\nlargest pelvis step per frame: reset {step['reset']:.2f} m, followed {step['followed']:.2f} m")
@@ -141,8 +142,9 @@ def test_a_reset_is_cross_faded_and_its_frames_marked(walk: np.ndarray) -> None:
     joint moves more from frame to frame there than the input's fastest joint + 2 cm (issue 62's line)."""
     root = walk[:, 0, :] - walk[0, 0, :]
     sliding = walk + 1.5 * root[:, None, :] * np.array([1.0, 0.0, 1.0])
-    out = project(sliding, config=ProjectionConfig.sampling(tau=0.3, follow_drift=False))
-    hard = project(sliding, config=ProjectionConfig.sampling(tau=0.3, follow_drift=False, crossfade=0.0))
+    out = project(sliding, config=ProjectionConfig.sampling(tau=0.3, follow_drift=False, recover=False))
+    hard = project(sliding, config=ProjectionConfig.sampling(tau=0.3, follow_drift=False, crossfade=0.0,
+                                                             recover=False))  # fmt: skip
 
     def steps(j: np.ndarray) -> np.ndarray:  # (T - 1,) the fastest joint's move into each frame
         return np.linalg.norm(np.diff(j, axis=0), axis=-1).max(axis=-1)
@@ -169,8 +171,8 @@ def test_a_body_short_of_a_flight_lands_instead_of_being_reset(walk: np.ndarray)
     t = np.arange(len(walk)) / 20.0
     lift = np.where((t >= 1.5) & (t <= 2.3), 0.3 * np.sin(np.pi * (t - 1.5) / 0.8), 0.0)
     hover = walk + lift[:, None, None] * np.array([0.0, 1.0, 0.0])
-    reset = project(hover, config=ProjectionConfig.sampling(let_land=False))
-    landed = project(hover, config=ProjectionConfig.sampling())
+    reset = project(hover, config=ProjectionConfig.sampling(let_land=False, recover=False))
+    landed = project(hover, config=ProjectionConfig.sampling(recover=False))
     rise = {name: np.diff(out.simulated[:, 0, 1]).max()
             for name, out in (("reset", reset), ("landed", landed))}  # fmt: skip
     print(f"\nresets {reset.resets} -> {landed.resets}; pelvis rise per frame {rise['reset']:.3f} -> "
@@ -341,8 +343,8 @@ def test_the_search_carries_a_falling_body_instead_of_a_reset() -> None:
     sample = generate(["a child hops around happily"], GenerateConfig(seconds=4.0, physics="none", seed=2),
                       model=MotionDiffusion.load()).motions[0].joints  # fmt: skip
     x = on_data_floor(sample)
-    reset = project(x, config=ProjectionConfig.sampling())
-    carried = project(x, config=ProjectionConfig.sampling(recover=True))
+    reset = project(x, config=ProjectionConfig.sampling(recover=False))
+    carried = project(x, config=ProjectionConfig.sampling())
     frames = np.flatnonzero(carried.recovered_frames)
     print(f"\nresets {reset.resets} -> {carried.resets}; carried {carried.recovered} time(s), frames {frames}")
     assert reset.resets >= 1 and reset.recovered == 0 and not reset.recovered_frames.any()
@@ -354,6 +356,41 @@ def test_the_search_carries_a_falling_body_instead_of_a_reset() -> None:
     np.testing.assert_array_equal(carried.joints[before], reset.joints[before])
 
 
+def test_where_the_search_falls_it_tries_once_more_from_further_back(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``ProjectionConfig.recover``: a search that falls from ``recover_back`` before the failing step is run
+    again from ``recover_retry_back`` before it (more time to steer the body), and only if that falls too is
+    the step left to a reset; with ``recover_retry_back`` 0 there is no second try."""
+    from types import SimpleNamespace
+
+    import physmotion.physics.projection as projection
+
+    starts: list[int] = []
+
+    class _FallsFirst:  # a search that falls when started 0.5 s before the step, not 1 s before
+        def __init__(self, *args) -> None:
+            pass
+
+        def run(self, ref, start):
+            k = 40
+            starts.append(k + 15 - len(ref.qpos) + 1)  # stop = k + 15 + 1 (0.5 s ahead at 30 Hz)
+            m = len(ref.qpos)
+            roll = SimpleNamespace(failed_at=2 if len(starts) == 1 else None, qpos=np.zeros((m, 3)),
+                                   mpjpe=np.zeros(m), contacts=np.zeros((m, 4), dtype=bool))  # fmt: skip
+            return roll, SimpleNamespace(qvel=np.zeros((m, 3)))
+
+    monkeypatch.setattr(projection, "SearchController", _FallsFirst)
+    ref = SimpleNamespace(qpos=np.zeros((100, 3)), window=lambda a, b: SimpleNamespace(qpos=np.zeros((b - a, 3))))
+    states = np.zeros((41, 6))
+    got = projection._recovery(None, ProjectionConfig.sampling(recover=True))(ref, states, 40, 0)
+    assert starts == [25, 10] and got.start == 10 and len(got.qpos) == 40 + 15 - 10 + 1
+    starts.clear()
+    once = projection._recovery(None, ProjectionConfig.sampling(recover=True, recover_retry_back=0.0))
+    assert once(ref, states, 40, 0) is None and starts == [25]
+    starts.clear()  # an earlier stretch bounds both tries at the same start: the same search is not run twice
+    assert projection._recovery(None, ProjectionConfig.sampling(recover=True))(ref, states, 40, 30) is None
+    assert starts == [30]
+
+
 def test_recover_is_for_the_tracker_with_resets() -> None:
     with pytest.raises(ShapeError, match="recover"):
         ProjectionConfig(controller="search", reset_on_fail=True, recover=True)
@@ -361,6 +398,8 @@ def test_recover_is_for_the_tracker_with_resets() -> None:
         ProjectionConfig(recover=True)  # no reset to replace
     with pytest.raises(ShapeError, match="recover_back"):
         ProjectionConfig.sampling(recover_back=-1.0)
+    with pytest.raises(ShapeError, match="recover_retry_back"):
+        ProjectionConfig.sampling(recover_retry_back=6.0)
 
 
 def test_the_fallback_is_for_the_tracker() -> None:

@@ -62,3 +62,35 @@ def test_help_in_full_counts_every_cap_and_keeps_the_peaks(real_walk: np.ndarray
         assert roll.at_cap[1:].mean() > 0.3, roll.at_cap.mean()
     # the lift cap binds while the force's norm is far from its own: the old mean-force rule missed it
     assert np.all(lift.residual_force[lift.at_cap] < 0.99 * 10.0)
+
+
+def test_a_body_handed_back_off_the_motion_goes_on_with_the_recovery() -> None:
+    """``simulate``'s ``recover``: a stretch another controller carried to the last step stands whatever its
+    error there (that controller judges falls, not the distance to the motion); one that ends earlier with
+    the body still off the motion is handed to it again from there, and only where it gives up is the
+    body reset."""
+    from physmotion.physics.sim import Recovery
+
+    model = build_model(REST_OFFSETS)
+    standing = np.repeat(rest_joints(REST_OFFSETS)[None], 20, axis=0)
+    standing[10:, :, 0] += 0.5  # the motion steps 0.5 m sideways in one frame: the tracker is left behind
+    ref = prepare_reference(model, joints_to_qpos(standing, model, lift=foot_lift(REST_OFFSETS)), 1 / 30)
+    tracker = ModelBasedTracker(model, TrackingConfig(feet_balance=False))
+
+    def carry_until(stop: int, calls: list):
+        def recover(ref, states, k, earliest):  # hold the state of step 5 (0.5 m off the motion) until stop
+            calls.append((k, earliest))
+            if len(calls) > 1:
+                return None  # handed back again: gives up
+            m = stop - 5 + 1
+            return Recovery(5, np.repeat(states[5:6, : model.nq], m, axis=0), np.zeros((m, model.nv)),
+                            np.full(m, 0.5), np.zeros((m, 4), dtype=bool))  # fmt: skip
+
+        return recover
+
+    calls: list = []
+    to_end = simulate(model, ref, tracker, fail_mpjpe=0.15, reset_on_fail=True, recover=carry_until(19, calls))
+    assert calls == [(10, 0)] and to_end.recovered == 1 and to_end.resets == 0 and to_end.recovered_steps[6:].all()
+    calls = []
+    short = simulate(model, ref, tracker, fail_mpjpe=0.15, reset_on_fail=True, recover=carry_until(15, calls))
+    assert calls == [(10, 0), (15, 15)] and short.recovered == 1 and short.resets == 1 and short.reset_steps[15]
