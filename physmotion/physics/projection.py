@@ -536,12 +536,12 @@ def _recovery(model, config: ProjectionConfig) -> Recover:
 
     def recover(ref, states: np.ndarray, k: int, earliest: int) -> Recovery | None:
         stop = min(len(ref.qpos), k + ahead + 1)
-        tried = set()
+        starts: set[int] = set()
         for back in backs:
             start = max(earliest, k - back)
-            if start in tried:  # the earlier try started there already: the same search again
+            if start in starts:  # the earlier try started there already: the same search again
                 continue
-            tried.add(start)
+            starts.add(start)
             search = SearchController(model, replace(config.search, seed=config.search.seed + k), config.humanoid,
                                       config.tracking)  # fmt: skip
             roll, record = search.run(ref.window(start, stop), start=states[start])
