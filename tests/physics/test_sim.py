@@ -1,4 +1,5 @@
-"""The simulation loop's report of joint torques past the actuators' limits (the feet-balance path)."""
+"""The simulation loop: joint torques past the actuators' limits (the feet-balance path), every kind of help
+it counts, and the hand-overs to another controller in place of a reset (``simulate``'s ``recover``)."""
 
 from __future__ import annotations
 
