@@ -8,7 +8,7 @@ from tests.test_cli import run
 def test_evaluate_quick_writes_markdown_and_json(tiny_model_dir, tiny_evaluator_dir, built_dir, tmp_path):
     out = tmp_path / "res" / "quick"
     res = run("evaluate", "--data", built_dir, "--model", tiny_model_dir, "--evaluator", tiny_evaluator_dir,
-              "--physics", "none,post:1", "--quick", "--eta", "1", "-o", out)
+              "--physics", "none,post:1", "--no-recover", "--quick", "--eta", "1", "-o", out)
     assert res.returncode == 0, res.stderr
     assert "| real |" in res.stdout and "| post:1 |" in res.stdout
     data = json.loads(out.with_suffix(".json").read_text())
