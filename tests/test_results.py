@@ -396,11 +396,12 @@ def morph_search_quotes() -> list[str]:
     ]
 
 
-def step_jumps_quotes() -> list[str]:
-    """Whose jumps are "jumps past the sample's" (results/step_jumps.json): PhysDiff's against the plain sample
-    and against what its last P was given, the denoiser's share, and the resets among the flagged."""
-    rows = _load("step_jumps.json")["modes"]
-    d, p = rows[END2], rows["post:1"]
+def step_jumps_quotes(name: str = "step_jumps.json", physdiff: str = END2) -> list[str]:
+    """Whose jumps are "jumps past the sample's" (results/step_jumps.json, or ``name`` with PhysDiff as
+    ``physdiff``): PhysDiff's against the plain sample and against what its last P was given, the denoiser's
+    share, and the resets among the flagged."""
+    rows = _load(name)["modes"]
+    d, p = rows[physdiff], rows["post:1"]
 
     def pct(x: float) -> str:
         return f"{100 * x:.0f} %"
@@ -453,7 +454,7 @@ QUOTES = {  # which doc quotes which result file
     ("limitations", "learn"): learn_quotes,
     ("results", "learn at scale"): learn_at_scale_quotes,
     ("limitations", "learn at scale"): learn_at_scale_quotes,
-    ("limitations", "step jumps"): step_jumps_quotes,
+    ("limitations", "step jumps recover"): lambda: step_jumps_quotes("step_jumps_recover.json", DEFAULT_PHYSDIFF),
     ("results", "step jumps"): step_jumps_quotes,
     ("limitations", "flight fly"): flight_fly_quotes,
 }
@@ -469,7 +470,8 @@ def _section(text: str, source: str) -> str:
              "new prompts fine": "new_prompts_fine",
              "biomodiffuse": "results/biomodiffuse", "refine": "results/refine", "imitator": "results/imitator_",
              "imitator captured": "results/imitator_captured", "learn": "learn_from_search", "learn at scale": "learn_at_scale",
-             "morph search": "morph_search.*", "step jumps": "results/step_jumps", "flight fly": "flight_kept_fly"}
+             "morph search": "morph_search.*", "step jumps": "results/step_jumps", "step jumps recover": "results/step_jumps_recover",
+             "flight fly": "flight_kept_fly"}
     marker = files[source]
     return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
 
