@@ -16,7 +16,7 @@ from physmotion.imitator.vec_env import CapCurriculum
 from physmotion.physics.policy import OBS_DIM, PolicySettings, capped_tracking
 from physmotion.physics.search import no_hand
 from physmotion.physics.tracking import TrackingConfig
-from tests.imitator.conftest import TINY_TEACHER
+from tests.conftest import TINY_TEACHER
 from physmotion.physics.projection import ProjectionConfig, prepare_motion
 from physmotion.physics.sim import simulate
 from physmotion.physics.tracking import ModelBasedTracker
