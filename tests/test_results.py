@@ -368,6 +368,27 @@ def learn_at_scale_quotes() -> list[str]:
     return out
 
 
+PPO_SCALE_ROWS = {  # the rows of results/ppo_at_scale.json the docs quote, by the words they use
+    "the bare tracker with its hand off": "tracker, hand off",
+    "the DAgger 2 student it starts from": "warm start (student)",
+    "PPO on 2 cores": "PPO, 2 cores, 7 min",
+    "PPO on the device": "PPO, device, 16 cores + H200, 7 min",
+}
+
+
+def ppo_at_scale_quotes() -> list[str]:
+    """PPO at two sample budgets (results/ppo_at_scale.json): each run's samples, and per quoted row what
+    learn_quotes gives."""
+    got = _load("ppo_at_scale.json")
+    rows = {r["row"]: r for r in got["rows"]}
+    out = [f"{card['samples']:,} samples" for card in got["cards"].values()]
+    for words, name in PPO_SCALE_ROWS.items():
+        c, g = rows[name]["captured"], rows[name]["generated"]
+        out.append(f"{words}: {100 * c['completed']:.0f} % / {100 * g['completed']:.0f} % (survived "
+                   f"{c['survived']:.2f} / {g['survived']:.2f}, CPU {c['cpu_s_per_s']:.2f} / {g['cpu_s_per_s']:.2f} s per s)")
+    return out
+
+
 def morph_search_quotes() -> list[str]:
     """A Morph round refined by the search (issue 61, item 8): the refined synthetic motions, the models on
     the test split and their plain samples of jump prompts, tracker-refined then search-refined."""
@@ -454,6 +475,8 @@ QUOTES = {  # which doc quotes which result file
     ("limitations", "learn"): learn_quotes,
     ("results", "learn at scale"): learn_at_scale_quotes,
     ("limitations", "learn at scale"): learn_at_scale_quotes,
+    ("results", "ppo at scale"): ppo_at_scale_quotes,
+    ("limitations", "ppo at scale"): ppo_at_scale_quotes,
     ("limitations", "step jumps recover"): lambda: step_jumps_quotes("step_jumps_recover.json", DEFAULT_PHYSDIFF),
     ("results", "step jumps"): step_jumps_quotes,
     ("limitations", "flight fly"): flight_fly_quotes,
@@ -470,6 +493,7 @@ def _section(text: str, source: str) -> str:
              "new prompts fine": "new_prompts_fine",
              "biomodiffuse": "results/biomodiffuse", "refine": "results/refine", "imitator": "results/imitator_",
              "imitator captured": "results/imitator_captured", "learn": "learn_from_search", "learn at scale": "learn_at_scale",
+             "ppo at scale": "ppo_at_scale",
              "morph search": "morph_search.*", "step jumps": "results/step_jumps", "step jumps recover": "results/step_jumps_recover",
              "flight fly": "flight_kept_fly"}
     marker = files[source]
