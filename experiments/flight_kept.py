@@ -53,10 +53,13 @@ def _variant(name: str):
         return replace(base, fallback=True)
     if name == "no_recover":  # the tracker resets the body at once where it falls (the default before recover)
         return replace(base, recover=False)
+    if name == "search":  # the search controller in place of the tracker: no outside hand, default effort
+        return base.with_controller("search")
     raise ValueError(f"unknown variant {name!r}")
 
 
-VARIANTS = ("sampling", "ballistic", "no_land", "ballistic_no_land", "lift_0.3", "fallback", "no_recover")
+VARIANTS = ("sampling", "ballistic", "no_land", "ballistic_no_land", "lift_0.3", "fallback", "no_recover",
+            "search")
 
 
 def _cpu_wall() -> np.ndarray:
