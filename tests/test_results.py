@@ -441,6 +441,17 @@ def flight_fly_quotes() -> list[str]:
             f"(before: {100 * old['with_reset']:.0f} %)"]
 
 
+def flight_search_quotes() -> list[str]:
+    """One P of the held-out seeds' plain samples by the tracker and by the search
+    (results/flight_kept_search.json)."""
+    rows = _load("flight_kept_search.json")["rows"]
+    t, s = rows["sampling"], rows["search"]
+    cpu = s["cpu_s_per_s"] / t["cpu_s_per_s"]
+    return [f"one P by the search keeps {s['flight_kept']:.2f} (the tracker's {t['flight_kept']:.2f})",
+            f"{100 * s['step_jumps']:.0f} % of its outputs jump past the sample's ({100 * t['step_jumps']:.0f} %)",
+            f"Phys-Err {s['phys_err']:.1f} against {t['phys_err']:.1f} mm", f"{cpu:.0f}x the CPU"]
+
+
 QUOTES = {  # which doc quotes which result file
     ("docs results", "evaluate"): evaluate_quotes,
     ("docs results", "bench"): bench_quotes,
@@ -480,6 +491,7 @@ QUOTES = {  # which doc quotes which result file
     ("limitations", "step jumps recover"): lambda: step_jumps_quotes("step_jumps_recover.json", DEFAULT_PHYSDIFF),
     ("results", "step jumps"): step_jumps_quotes,
     ("limitations", "flight fly"): flight_fly_quotes,
+    ("limitations", "flight search"): flight_search_quotes,
 }
 
 
@@ -495,7 +507,7 @@ def _section(text: str, source: str) -> str:
              "imitator captured": "results/imitator_captured", "learn": "learn_from_search", "learn at scale": "learn_at_scale",
              "ppo at scale": "ppo_at_scale",
              "morph search": "morph_search.*", "step jumps": "results/step_jumps", "step jumps recover": "results/step_jumps_recover",
-             "flight fly": "flight_kept_fly"}
+             "flight fly": "flight_kept_fly", "flight search": "flight_kept_search"}
     marker = files[source]
     return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
 
