@@ -55,11 +55,15 @@ def _variant(name: str):
         return replace(base, recover=False)
     if name == "search":  # the search controller in place of the tracker: no outside hand, default effort
         return base.with_controller("search")
+    if name == "search_velocity":  # the same, its cost also on the bodies' velocity error to the reference's
+        searched = base.with_controller("search")
+        cost = replace(searched.search.cost, body_velocity=0.1)
+        return replace(searched, search=replace(searched.search, cost=cost))
     raise ValueError(f"unknown variant {name!r}")
 
 
 VARIANTS = ("sampling", "ballistic", "no_land", "ballistic_no_land", "lift_0.3", "fallback", "no_recover",
-            "search")
+            "search", "search_velocity")
 
 
 def _cpu_wall() -> np.ndarray:

@@ -52,6 +52,8 @@ class SearchCost:
     height: float = 20.0  # pelvis height error^2, m^2
     velocity: float = 0.05  # root linear velocity error^2, (m/s)^2
     slip: float = 0.02  # squared horizontal speed of feet low enough to stand, (m/s)^2
+    body_velocity: float = 0.0  # mean squared body-velocity error to the reference's, (m/s)^2; 0: off
+    # (docs/decisions/projection.md, "the search as generation's P for jumps")
     fall: float = 100.0  # added for every control step after a fall
 
 
@@ -393,6 +395,12 @@ class SearchController:
         cost += c.heading * dyaw**2
         cost += c.height * (qpos[..., 2] - goal.qpos[idx, 2][None]) ** 2
         cost += c.velocity * np.sum((qvel[..., :3] - goal.qvel[idx, :3][None]) ** 2, axis=-1)
+        if c.body_velocity:  # a step the reference does not take costs (issue 62's frame-to-frame jumps)
+            prev = np.concatenate([bodies[:, :1], bodies[:, :-1]], axis=1)
+            ref_prev = goal.joints[np.maximum(idx - 1, 0)]
+            dv = ((bodies - prev) - (ref_b - ref_prev)[None]) / self.humanoid.control_dt
+            dv[:, 0] = 0.0  # the first step's previous position is not known here
+            cost += c.body_velocity * np.mean(np.sum(dv**2, axis=-1), axis=-1)
         if c.slip:
             feet = bodies[:, :, list(FOOT_JOINTS)]  # (C, S, 4, 3)
             prev = np.concatenate([feet[:, :1], feet[:, :-1]], axis=1)

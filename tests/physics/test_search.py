@@ -174,3 +174,27 @@ def test_a_push_starts_the_root_faster_and_one_window_is_seeded(captured_run: np
     a = search.window(ref, full, 5, np.zeros(NUM_ACTIONS), seed=9)
     b = search.window(ref, full, 5, np.zeros(NUM_ACTIONS), seed=9)
     assert a.shape == (NUM_ACTIONS,) and np.array_equal(a, b)
+
+
+def test_the_body_velocity_cost_charges_a_step_the_reference_does_not_take(captured_run: np.ndarray) -> None:
+    """Two candidates on the reference's own states, one with a single frame pushed 5 cm sideways: the
+    body-velocity term (off by default) charges the pushed one's two steps into and out of that frame."""
+    from physmotion.physics.search import SearchCost, SearchGoal
+
+    search, ref = _short_search(captured_run)
+    steps, k = 6, 2
+    states = np.zeros((2, steps, search._nstate))
+    at, nq = search._qpos_at, search.model.nq
+    states[:, :, at : at + nq] = ref.qpos[k + 1 : k + 1 + steps]
+    states[:, :, at + nq : at + nq + search.model.nv] = ref.qvel[k + 1 : k + 1 + steps]
+    states[1, 3, at] += 0.05  # the root, and with it every body, 5 cm off at one step
+    costs = {}
+    for weight in (0.0, 0.1):
+        search.config = replace(search.config, cost=replace(SearchCost(), body_velocity=weight))
+        costs[weight], _, _ = search._cost(states, SearchGoal(ref, search.config), k)
+    extra = costs[0.1] - costs[0.0]  # (2, steps): the velocity term alone
+    assert np.allclose(extra[0], 0.0, atol=1e-6)  # the reference's own steps cost nothing
+    assert extra[1, 3] > 0 and extra[1, 4] > 0  # into the pushed frame and out of it
+    assert np.allclose(extra[1, [0, 1, 2, 5]], 0.0, atol=1e-6)
+    # 5 cm in one control step is 1.5 m/s on every body: 0.1 x 1.5^2 = 0.225
+    assert extra[1, 3] == pytest.approx(0.1 * (0.05 * 30) ** 2, rel=1e-3)
