@@ -22,6 +22,7 @@ from pathlib import Path
 
 from experiments._results import markdown_table, parse_args, run_meta, write_results
 from experiments.learn_from_search import evaluate_rows, heldout_motions
+from physmotion.errors import PhysmotionError
 from physmotion.imitator.teacher import load_teacher_set
 
 
@@ -49,7 +50,10 @@ def main(argv: list[str] | None = None) -> dict:
     for folder in (args.student, *runs.values()):
         if not (Path(folder) / "settings.json").is_file():
             ap.error(f"{folder}: not a policy folder (no settings.json)")
-    records = load_teacher_set(args.teacher)  # before the work: a wrong folder fails in one line
+    try:  # before the work: a wrong folder fails in one line
+        records = load_teacher_set(args.teacher)
+    except PhysmotionError as e:
+        ap.error(str(e))
     teacher = {"records": len(records), "control_steps": sum(len(r["offsets"]) for r in records),
                "cpu_seconds": round(sum(float(r["cpu_seconds"]) for r in records), 1),
                "licence_tags": sorted({str(r["licence_tag"]) for r in records})}  # fmt: skip
@@ -76,9 +80,8 @@ def main(argv: list[str] | None = None) -> dict:
             f"{len(motions) - n_cap} generated motions of prompts never used for teacher data.\n\n"
             f"{markdown_table(header, table)}\n")  # fmt: skip
     meta = run_meta(__file__, argv, args.tree, None)
-    payload = {"meta": meta, "rows": json_rows, "cards": cards, "student_fit": fit, "prompts": prompts,
-               "teacher": teacher,
-               "test_clips": [c.name for c in test]}  # fmt: skip
+    payload = {"meta": meta, "rows": json_rows, "cards": cards, "student_fit": fit, "teacher": teacher,
+               "prompts": prompts, "test_clips": [c.name for c in test]}  # fmt: skip
     write_results(args.results, text, payload)
     print(text)
     return payload

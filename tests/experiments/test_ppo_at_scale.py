@@ -1,5 +1,5 @@
 """experiments/ppo_at_scale.py: every row measured on both held-out sets, each PPO row with its card's
-budget; a malformed --ppo is refused in one line."""
+budget; a malformed --ppo or an empty teacher folder is refused in one line."""
 
 from __future__ import annotations
 
@@ -36,10 +36,17 @@ def test_rows_on_both_sets_with_each_run_s_samples(small_built_dir: Path, teache
     assert f"{samples:,} (" in table.splitlines()[-1]  # the PPO row names its budget; the others do not
 
 
-@pytest.mark.parametrize("ppo", ["no-equals-sign", "x=/nonexistent/policy"])
-def test_a_malformed_ppo_is_refused_before_any_work(ppo: str, teacher_dir: Path, tmp_path: Path,
-                                                    capsys: pytest.CaptureFixture) -> None:  # fmt: skip
+@pytest.mark.parametrize(("ppo", "teacher"), [("no-equals-sign", None), ("x=/nonexistent/policy", None),
+                                              (f"shipped={SHIPPED}", "empty")])  # fmt: skip
+def test_bad_input_is_refused_in_one_line_before_any_work(
+    ppo: str, teacher: str | None, teacher_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    folder = teacher_dir
+    if teacher == "empty":  # a teacher folder with no records
+        folder = tmp_path / "empty"
+        folder.mkdir()
     with pytest.raises(SystemExit) as e:
-        main(["--teacher", str(teacher_dir), "--student", SHIPPED, "--ppo", ppo,
+        main(["--teacher", str(folder), "--student", SHIPPED, "--ppo", ppo,
               "--results", str(tmp_path / "r"), "--allow-dirty"])  # fmt: skip
-    assert e.value.code == 2 and "error:" in capsys.readouterr().err and not list(tmp_path.iterdir())
+    assert e.value.code == 2 and "error:" in capsys.readouterr().err
+    assert not (tmp_path / "r.md").exists() and not (tmp_path / "r.json").exists()
