@@ -316,6 +316,14 @@ def morph_retuned_quotes() -> list[str]:
     ]
 
 
+def _carried(words: str, row: dict) -> str:
+    """A controller row of the learning experiments as the docs quote it: carried to the end on captured /
+    generated motion, share survived, CPU seconds per second."""
+    c, g = row["captured"], row["generated"]
+    return (f"{words}: {100 * c['completed']:.0f} % / {100 * g['completed']:.0f} % (survived "
+            f"{c['survived']:.2f} / {g['survived']:.2f}, CPU {c['cpu_s_per_s']:.2f} / {g['cpu_s_per_s']:.2f} s per s)")
+
+
 LEARN_ROWS = {  # the rows of results/learn_from_search.json the docs quote, by the words they use
     "the bare tracker with its hand off": "tracker, hand off",
     "the full search": "search default (full)",
@@ -336,9 +344,7 @@ def learn_quotes() -> list[str]:
     out = [f"{teacher['written']} searches, {sum(r['motion s'] for r in teacher['rows']):.0f} s of motion, "
            f"{teacher['cpu_seconds']:.0f} CPU s"]  # fmt: skip
     for words, name in LEARN_ROWS.items():
-        c, g = rows[name]["captured"], rows[name]["generated"]
-        out.append(f"{words}: {100 * c['completed']:.0f} % / {100 * g['completed']:.0f} % (survived "
-                   f"{c['survived']:.2f} / {g['survived']:.2f}, CPU {c['cpu_s_per_s']:.2f} / {g['cpu_s_per_s']:.2f} s per s)")
+        out.append(_carried(words, rows[name]))
     return out
 
 
@@ -362,9 +368,7 @@ def learn_at_scale_quotes() -> list[str]:
            f"held-out error {last_bc['val_mse']:.3f} against {last_bc['val_mse_zero']:.3f} for predicting nothing"]
     for words, name in SCALE_ROWS.items():
         name = name.format(refs=got["references"], pairs=got["pairs"], dagger=dagger["pairs"])
-        c, g = rows[name]["captured"], rows[name]["generated"]
-        out.append(f"{words}: {100 * c['completed']:.0f} % / {100 * g['completed']:.0f} % (survived "
-                   f"{c['survived']:.2f} / {g['survived']:.2f}, CPU {c['cpu_s_per_s']:.2f} / {g['cpu_s_per_s']:.2f} s per s)")
+        out.append(_carried(words, rows[name]))
     return out
 
 
@@ -383,9 +387,7 @@ def ppo_at_scale_quotes() -> list[str]:
     rows = {r["row"]: r for r in got["rows"]}
     out = [f"{card['samples']:,} samples" for card in got["cards"].values()]
     for words, name in PPO_SCALE_ROWS.items():
-        c, g = rows[name]["captured"], rows[name]["generated"]
-        out.append(f"{words}: {100 * c['completed']:.0f} % / {100 * g['completed']:.0f} % (survived "
-                   f"{c['survived']:.2f} / {g['survived']:.2f}, CPU {c['cpu_s_per_s']:.2f} / {g['cpu_s_per_s']:.2f} s per s)")
+        out.append(_carried(words, rows[name]))
     return out
 
 
