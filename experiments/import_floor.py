@@ -7,7 +7,8 @@ Per source (every N-th clip of each source's manifest, N = 1: all): clips, Penet
 the metrics' own measure: ``physmotion metrics``'s humanoid surface on the saved float32 joints) mean and
 max, clips at or over 2 mm; "contact Float": Float over the frames where a foot or hand stands
 (:mod:`physmotion.io.floor`), the soles' height over the floor the source stood on; the share of frames
-where only a hand touches; the joint-only surface's Penetrate beside it. Round trip: every N-th of those
+where only a hand touches; the joint-only surface's Penetrate beside it; the clips on ground that is not
+level (``physmotion.io.floor.UNEVEN_GROUND``) and Penetrate over the others. Round trip: every N-th of those
 clips exported to BVH and imported again, largest joint distance over all frames. ``--generated``: also two
 motions of the default model (``generate "a person walks forward" "a person jumps" --seconds 4 --seed 0``,
 P's output) exported and imported: mean and max joint distance. Writes ``<out>.md`` and ``<out>.json``.
@@ -61,7 +62,7 @@ def main(argv: list[str] | None = None) -> None:
                     "penetrate": m["penetrate"], "float": m["float"], "skate": m["skate"],
                     "penetrate_joints": light["penetrate"], "hand_share": report.grounding.hand_share,
                     "contact_float": float(stand[contact].mean()) if contact.any() else float("nan"),
-                    "lift_mm": 1000 * report.grounding.lift,
+                    "lift_mm": 1000 * report.grounding.lift, "level": report.grounding.level,
                 })  # fmt: skip
                 if (len(rows[info.source]) - 1) % args.round_trip_every == 0:  # each source's 1st, N+1th, ...
                     path = Path(tmp) / "x.bvh"
@@ -80,17 +81,22 @@ def main(argv: list[str] | None = None) -> None:
             "contact_float_over_5mm": int((v["contact_float"] > 5).sum()),
             "float_mean": v["float"].mean(), "skate_mean": v["skate"].mean(),
             "penetrate_joints_mean": v["penetrate_joints"].mean(), "round_trip_max_mm": t.max(),
-            "round_trip_clips": len(t),
+            "round_trip_clips": len(t), "not_level": int((~v["level"]).sum()),
+            # every clip of a source may be on uneven ground (a source of one such take): NaN then
+            "penetrate_level_mean": v["penetrate"][v["level"]].mean() if v["level"].any() else np.nan,
+            "penetrate_level_max": v["penetrate"][v["level"]].max() if v["level"].any() else np.nan,
         }  # fmt: skip
         s = {k: float(x) if isinstance(x, np.floating) else x for k, x in summary[source].items()}
         summary[source] = s
         table.append((source, s["clips"], f"{s['penetrate_mean']:.2f} / {s['penetrate_max']:.2f}", s["over_2mm"],
                       f"{s['float_mean']:.1f}", f"{s['contact_float_mean']:.1f} / {s['contact_float_max']:.1f}",
                       s["contact_float_over_5mm"], f"{100 * s['hand_share']:.1f}", f"{s['skate_mean']:.1f}",
-                      f"{s['penetrate_joints_mean']:.2f}", f"{s['round_trip_max_mm']:.4f}, {s['round_trip_clips']}"))
+                      f"{s['penetrate_joints_mean']:.2f}", f"{s['round_trip_max_mm']:.4f}, {s['round_trip_clips']}",
+                      s["not_level"], f"{s['penetrate_level_mean']:.2f} / {s['penetrate_level_max']:.2f}"))
     header = ("source", "clips", "Penetrate mean / max (mm)", "clips >= 2 mm", "Float",
               "contact Float mean / max", "clips contact Float > 5 mm", "hand-only contact %", "Skate",
-              "Penetrate, joint surface", "round trip max (mm), clips")  # fmt: skip
+              "Penetrate, joint surface", "round trip max (mm), clips", "not level",
+              "Penetrate mean / max, level clips")  # fmt: skip
     md = "# Where imported motion meets the floor\n\n" + markdown_table(header, table) + "\n"
     generated = _generated() if args.generated else {}
     if generated:

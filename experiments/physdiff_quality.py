@@ -56,8 +56,8 @@ def compare_modes(
     """Generate one motion per prompt in each mode; mode spelling -> physical metrics (mean over
     motions) plus ``seconds_per_motion``, ``tracked`` (fraction of all projections, PhysDiff's four per
     motion included, in which the humanoid never fell), :func:`reset_columns`, :func:`imitation_columns`
-    and ``per_motion``: each motion's Phys-Err (mm) and resets, in prompt order (a test reproduces a
-    prefix of the prompts: sample i's noise depends on the seed and i only).
+    and ``per_motion``: each motion's Phys-Err (mm) and resets, in prompt order (which motions a mean
+    comes from).
 
     surface "humanoid": the humanoid's geometry, with the body P simulated for projected outputs and one
     estimated from the joints otherwise; "joints": the joint-only surface model."""

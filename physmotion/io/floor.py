@@ -15,6 +15,10 @@ with a flat hand). The importer grounds a motion in that same convention:
    minimisers (:func:`best_floor`, exact). A clip with no contact frame (a hop cut from take-off to
    landing) puts its lowest point over the clip on the floor.
 
+Ground that is not level (a walk over steps or rough ground) has no single floor: where the body's lowest
+point over the contact frames spreads wider than :data:`UNEVEN_GROUND`, :class:`Grounding` says so
+(``level`` False) and the importer warns (:class:`UnevenGroundWarning`).
+
 Hands count only in the frames where they touch the floor; a low hand elsewhere weighs like any
 frame's lowest point, in Penetrate only. Every step moves with the motion (speeds, heights relative to
 the frame), so grounding a grounded motion changes nothing. History (the earlier cap on Penetrate,
@@ -28,13 +32,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from physmotion.conventions import FPS, UP_AXIS
-from physmotion.errors import ShapeError
+from physmotion.errors import PhysmotionWarning, ShapeError
 from physmotion.skeleton import FOOT_JOINTS, NUM_JOINTS
 
 STANCE_SPEED: float = 0.15
 """m/s: a foot joint slower than this (to both neighbouring frames) may be planted."""
 STANCE_BAND: float = 0.03
 """m: ... if it is within this of the frame's lowest foot joint (the other foot may be lifted)."""
+UNEVEN_GROUND: float = 0.15
+"""m: contact frames whose lowest points spread (5th to 95th percentile) wider than this stand on ground that
+is not level. CMU's "walk on uneven terrain" takes spread 0.24-0.34 m, every other clip of our data at most
+0.12 m (a body lying down; docs/decisions/data.md, "ground that is not level")."""
 _TOLERANCE = 0.005  # m: the metrics' Penetrate and Float tolerance (MetricParams.tolerance)
 
 STANCE: str = "stance"
@@ -49,12 +57,25 @@ IMPORT_FLOORS: tuple[str, ...] = (STANCE, FRAME0)
 @dataclass(frozen=True)
 class Grounding:
     """What grounding did: ``lift`` metres added to y; the floor ``stance_floor`` it chose (m, before the
-    shift: ``-lift``); the share of contact frames, and of them those where only a hand touches."""
+    shift: ``-lift``); the share of contact frames, and of them those where only a hand touches; and
+    ``stance_spread``, how far apart (m, 5th to 95th percentile) the body's lowest point lies over the
+    contact frames."""
 
     lift: float
     stance_floor: float
     stance_share: float
     hand_share: float
+    stance_spread: float = 0.0
+
+    @property
+    def level(self) -> bool:
+        """Whether the contact frames stand on one level floor (:data:`UNEVEN_GROUND`)."""
+        return self.stance_spread <= UNEVEN_GROUND
+
+
+class UnevenGroundWarning(PhysmotionWarning):
+    """An imported clip stands on ground that is not level: a level floor leaves some of its steps in the
+    floor or above it (:data:`UNEVEN_GROUND`)."""
 
 
 def stance_frames(joints: np.ndarray, fps: float = FPS) -> np.ndarray:
@@ -115,6 +136,7 @@ def ground(joints: np.ndarray, fps: float = FPS) -> tuple[np.ndarray, Grounding]
     hands = hand_frames(x, surface.hand_heights(x), lowest, fps)
     contact = feet | hands
     floor = best_floor(lowest, contact) if contact.any() else float(lowest.min())  # no contact: all in motion
+    spread = float(np.subtract(*np.percentile(lowest[contact], [95, 5]))) if contact.any() else 0.0
     out = x.copy()
     out[..., UP_AXIS] -= floor
-    return out, Grounding(-floor, floor, float(contact.mean()), float((hands & ~feet).mean()))
+    return out, Grounding(-floor, floor, float(contact.mean()), float((hands & ~feet).mean()), spread)

@@ -16,7 +16,7 @@ from physmotion.errors import MotionFormatError, PhysmotionError
 from physmotion.io.amc import read_amc, read_asf
 from physmotion.io.bvh import Latin1Warning, bvh_joint_names, read_bvh
 from physmotion.io.canonical import canonicalize
-from physmotion.io.floor import STANCE, Grounding
+from physmotion.io.floor import STANCE, Grounding, UnevenGroundWarning
 from physmotion.io.mapping import load_mapping
 from physmotion.io.rigs import RIGS, JointSource, RigMotion, RigTable, parse_units, table_from_mapping
 from physmotion.motion import Motion
@@ -252,6 +252,11 @@ def _import(
         table.name, motion.num_frames, float(rate), canon.dropped_tpose, canon.fit_mean, canon.fit_max,
         canon.grounding,
     )
+    if not canon.grounding.level:
+        spread = 100 * canon.grounding.stance_spread
+        warnings.warn(UnevenGroundWarning(f"{path}: the body stands at heights {spread:.0f} cm apart: the ground "
+                                          "is not level, so on a level floor some steps sink in and some float"),
+                      stacklevel=3)  # fmt: skip
     return result, report
 
 

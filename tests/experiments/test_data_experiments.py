@@ -16,6 +16,9 @@ def test_import_floor_writes_each_source(small_mocap_dir: Path, tmp_path: Path) 
     assert data["meta"]["preset"] is None and data["meta"]["round_trip_every"] == 8
     assert sum(s["clips"] for s in data["sources"].values()) == 23
     assert all(s["round_trip_max_mm"] < 1.0 for s in data["sources"].values())
+    # the small collection stands on level ground (CMU's uneven-terrain walks are not in it)
+    for s in data["sources"].values():
+        assert s["not_level"] == 0 and s["penetrate_level_mean"] == pytest.approx(s["penetrate_mean"])
     assert "| source | clips |" in out.with_suffix(".md").read_text()
 
 

@@ -14,7 +14,7 @@ import pytest
 
 from physmotion.errors import PhysmotionError
 from physmotion.io import ClipInfo, import_clip, import_clip_with_report, save_bvh
-from physmotion.io.floor import best_floor, ground, hand_frames, stance_frames
+from physmotion.io.floor import UnevenGroundWarning, best_floor, ground, hand_frames, stance_frames
 from physmotion.metrics.physical import penetrate
 from physmotion.motion import Motion
 from physmotion.physics.surface import HumanoidSurface
@@ -89,6 +89,29 @@ def _every_clip(import_results, hdm05_results) -> dict[str, tuple[str, Motion, o
             if isinstance(v, tuple):
                 out[k] = (v[0].source, v[0], v[1])
     return out
+
+
+def test_a_walk_over_uneven_ground_is_named(clip) -> None:
+    """CMU's "walk on uneven terrain" stands at heights about 24 cm apart: no level floor fits it, and the
+    import says so in one warning naming the file; a walk on level ground (Bandai) imports silently."""
+    with pytest.warns(UnevenGroundWarning, match=r"03_01\.amc: the body stands at heights \d+ cm apart"):
+        _, uneven = import_clip_with_report(clip("cmu_03_01"))
+    assert not uneven.grounding.level and uneven.grounding.stance_spread > 0.2
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UnevenGroundWarning)
+        _, level = import_clip_with_report(clip("bandai2_dataset-2_walk_normal_001"))
+    assert level.grounding.level and level.grounding.stance_spread < 0.05
+
+
+@pytest.mark.slow
+def test_only_clips_captioned_uneven_stand_on_uneven_ground(manifest, hdm05_manifest, import_results,
+                                                           hdm05_results) -> None:  # fmt: skip
+    """Over every clip of both collections, the clips found not level are those whose captions say the
+    ground is uneven (CMU subject 3, as AMC and as iClone BVH), and only those."""
+    captions = {c.clip: " ".join(c.captions) for c in [*manifest, *hdm05_manifest]}
+    found = {k for k, (_, _, report) in _every_clip(import_results, hdm05_results).items()
+             if not report.grounding.level}  # fmt: skip
+    assert found == {k for k, text in captions.items() if "uneven" in text} and len(found) == 4
 
 
 @pytest.mark.slow
