@@ -454,6 +454,18 @@ def flight_search_quotes() -> list[str]:
             f"Phys-Err {s['phys_err']:.1f} against {t['phys_err']:.1f} mm", f"{cpu:.0f}x the CPU"]
 
 
+def import_floor_quotes() -> list[str]:
+    """Where imported clips meet the floor (results/import_floor.json): the uneven-ground clips, and mean
+    Penetrate per source over the level clips."""
+    src = _load("import_floor.json")["sources"]
+    level = {k: v["penetrate_level_mean"] for k, v in src.items()}
+    others = max(v for k, v in level.items() if k != "cmu_iclone")
+    return [f"({sum(v['not_level'] for v in src.values())} of {sum(v['clips'] for v in src.values())} clips",
+            f"at most {others:.1f} mm per source but cmu_iclone's {level['cmu_iclone']:.1f} mm",
+            f"(cmu_amc {level['cmu_amc']:.1f} mm, {src['cmu_amc']['penetrate_mean']:.1f} mm with the uneven take)",
+            f"single clips reach {max(v['penetrate_level_max'] for v in src.values()):.1f} mm"]
+
+
 QUOTES = {  # which doc quotes which result file
     ("docs results", "evaluate"): evaluate_quotes,
     ("docs results", "bench"): bench_quotes,
@@ -494,6 +506,7 @@ QUOTES = {  # which doc quotes which result file
     ("results", "step jumps"): step_jumps_quotes,
     ("limitations", "flight fly"): flight_fly_quotes,
     ("limitations", "flight search"): flight_search_quotes,
+    ("limitations", "import floor"): import_floor_quotes,
 }
 
 
@@ -509,7 +522,7 @@ def _section(text: str, source: str) -> str:
              "imitator captured": "results/imitator_captured", "learn": "learn_from_search", "learn at scale": "learn_at_scale",
              "ppo at scale": "ppo_at_scale",
              "morph search": "morph_search.*", "step jumps": "results/step_jumps", "step jumps recover": "results/step_jumps_recover",
-             "flight fly": "flight_kept_fly", "flight search": "flight_kept_search"}
+             "flight fly": "flight_kept_fly", "flight search": "flight_kept_search", "import floor": "import_floor"}
     marker = files[source]
     return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
 
