@@ -58,18 +58,10 @@ def pytest_configure(config: pytest.Config) -> None:
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Mark slow every test that needs the whole collection imported or built, and run first the tests whose
-    ``slow`` marker gives ``minutes``, longest first: xdist hands out tests in this order, so a long test
-    left to the end would keep one worker busy while the other has nothing to do."""
+    """Mark slow every test that needs the whole collection imported or built."""
     for item in items:
         if WHOLE_COLLECTION.intersection(getattr(item, "fixturenames", ())):
             item.add_marker(pytest.mark.slow)
-    items.sort(key=_minutes, reverse=True)  # stable: the rest keep their order
-
-
-def _minutes(item: pytest.Item) -> float:
-    """The ``minutes`` a test's ``slow`` marker states (``@pytest.mark.slow(minutes=8)``); 0 without."""
-    return max((float(m.kwargs.get("minutes", 0)) for m in item.iter_markers("slow")), default=0.0)
 
 
 @contextlib.contextmanager

@@ -24,6 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # `python tests/make_pins.py` puts tests/ first on the path, not the root
     sys.path.insert(0, str(ROOT))
 
+from experiments._results import cpu_model  # noqa: E402
 from tests.cli_runner import invoke  # noqa: E402
 
 PIN = ROOT / "tests" / "data" / "pins" / "generate.npz"
@@ -60,7 +61,7 @@ def provenance() -> str:
     return json.dumps({
         "runs": [list(r) for r in RUNS], "torch": torch.__version__, "numpy": np.__version__,
         "mujoco": mujoco.__version__, "python": platform.python_version(), "machine": platform.machine(),
-        "processor": platform.processor(), "torch_threads": torch.get_num_threads(),
+        "processor": platform.processor(), "torch_threads": torch.get_num_threads(), "cpu": cpu_model(),
     }, sort_keys=True)  # fmt: skip
 
 
@@ -69,14 +70,28 @@ def provenance() -> str:
 # of 2,640 values), float32 rounding in the simulation's inputs. Projected motions
 # are compared to ATOL_PHYSICS metres (0.01 mm), far below any change in behaviour.
 ATOL_PHYSICS = 1e-5
+# Another CPU rounds torch's and MuJoCo's float arithmetic differently: on an Intel Xeon against the pin of
+# 2026-11-30 (made, as that day's results, on an AMD EPYC), plain sampling moved by up to 1.67e-6 m and the
+# post:1 jump by 3.52e-5 m. A pin whose CPU is another's (or not recorded) is compared to these.
+ATOL_OTHER_CPU = {"none": 1e-5, "physics": 1e-3}
 
 
-def tolerance(key: str) -> float:
-    """0 (bit-identical) for plain sampling, :data:`ATOL_PHYSICS` for a motion that went through P."""
-    return 0.0 if key.startswith("none/") else ATOL_PHYSICS
+def tolerance(key: str, same_cpu: bool = True) -> float:
+    """On the CPU that made the pin: 0 (bit-identical) for plain sampling, :data:`ATOL_PHYSICS` for a motion
+    that went through P; on another, :data:`ATOL_OTHER_CPU`."""
+    plain = key.startswith("none/")
+    if not same_cpu:
+        return ATOL_OTHER_CPU["none" if plain else "physics"]
+    return 0.0 if plain else ATOL_PHYSICS
 
 
-def compare(expected: dict[str, np.ndarray], got: dict[str, np.ndarray]) -> list[str]:
+def pinned_on_this_cpu(path: Path = PIN) -> bool:
+    """Whether the pin's provenance names this machine's CPU (a pin that does not record its CPU: no)."""
+    with np.load(path) as data:
+        return json.loads(str(data["provenance"])).get("cpu") == cpu_model()
+
+
+def compare(expected: dict[str, np.ndarray], got: dict[str, np.ndarray], same_cpu: bool = True) -> list[str]:
     """One line per motion that is missing, extra, or differs beyond :func:`tolerance` (with its largest
     difference)."""
     problems = [f"{k}: missing from the new generation" for k in sorted(set(expected) - set(got))]
@@ -87,8 +102,9 @@ def compare(expected: dict[str, np.ndarray], got: dict[str, np.ndarray]) -> list
             problems.append(f"{key}: {b.dtype}{b.shape} generated, {a.dtype}{a.shape} pinned")
         elif not np.array_equal(a, b):
             diff = np.abs(a.astype(np.float64) - b.astype(np.float64))
-            if diff.max() > tolerance(key):
-                problems.append(f"{key}: differs, max {diff.max():.3g} m (allowed {tolerance(key):g}), "
+            allowed = tolerance(key, same_cpu)
+            if diff.max() > allowed:
+                problems.append(f"{key}: differs, max {diff.max():.3g} m (allowed {allowed:g}), "
                                 f"{int((diff > 0).sum())} of {diff.size} values")  # fmt: skip
     return problems
 
@@ -105,9 +121,12 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         got = generate_pins(Path(tmp))
     if args.check:
-        problems = compare(load_pin(), got)
-        print("\n".join(problems) or f"{len(got)} motions match {PIN.relative_to(ROOT)} (plain sampling "
-                                       f"bit-identical, projected within {ATOL_PHYSICS:g} m)")  # fmt: skip
+        same = pinned_on_this_cpu()
+        problems = compare(load_pin(), got, same)
+        within = (f"plain sampling bit-identical, projected within {ATOL_PHYSICS:g} m" if same else
+                  f"pinned on another CPU: plain sampling within {ATOL_OTHER_CPU['none']:g} m, projected "
+                  f"within {ATOL_OTHER_CPU['physics']:g} m")  # fmt: skip
+        print("\n".join(problems) or f"{len(got)} motions match {PIN.relative_to(ROOT)} ({within})")
         return 1 if problems else 0
     PIN.parent.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(PIN, provenance=np.array(provenance()), **got)
