@@ -70,9 +70,9 @@ def provenance() -> str:
 # of 2,640 values), float32 rounding in the simulation's inputs. Projected motions
 # are compared to ATOL_PHYSICS metres (0.01 mm), far below any change in behaviour.
 ATOL_PHYSICS = 1e-5
-# Another CPU rounds torch's and MuJoCo's float arithmetic differently: on an Intel Xeon against the pin of
-# 2026-11-30 (made, as that day's results, on an AMD EPYC), plain sampling moved by up to 1.67e-6 m and the
-# post:1 jump by 3.52e-5 m. A pin whose CPU is another's (or not recorded) is compared to these.
+# Another CPU rounds torch's and MuJoCo's float arithmetic differently: on an Intel Xeon against a pin made
+# on an AMD EPYC, plain sampling moved by up to 1.67e-6 m and the post:1 jump by 3.52e-5 m. A pin whose CPU
+# is another's (or not recorded: pins before the provenance named it) is compared to these.
 ATOL_OTHER_CPU = {"none": 1e-5, "physics": 1e-3}
 
 

@@ -23,7 +23,7 @@ def test_generated_motions_match_the_pin() -> None:
     regenerates the pin with ``.venv/bin/python tests/make_pins.py`` and says in its commit message why
     the motions changed. The pin was made on this project's 2-core x86-64 CI machine with the CPU build
     of torch; another CPU or library version may round differently: ``tests/make_pins.py --check``
-    prints by how much, and the file's ``provenance`` entry says what made it (its CPU since 2026-12-01).
+    prints by how much, and the file's ``provenance`` entry says what made it, its CPU included.
 
     It runs ``tests/make_pins.py --check`` in a fresh process, as a user's ``physmotion generate`` runs:
     inside a full test session the same generation moved one motion by 4.8e-7 m (measured), from state
