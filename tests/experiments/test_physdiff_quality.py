@@ -25,7 +25,7 @@ def test_physdiff_quality_writes_its_json(tmp_path: Path) -> None:
     (run,) = data["runs"]
     assert set(run) == {"none", "none+floor", "post:1", "post:4", "physdiff:end:4,space:1"}
     assert run["physdiff:end:4,space:1"]["phys_err"] < run["none"]["phys_err"]
-    # each motion's own figures, which the bench test reproduces a prefix of: with one motion, its mean
+    # each motion's own figures (which motions a mean comes from): with one motion, its mean
     for row in run.values():
         assert row["per_motion"]["phys_err"] == [pytest.approx(row["phys_err"])]
         assert len(row["per_motion"]["resets"]) == 1
