@@ -37,7 +37,7 @@ from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.samplers import ddim_50
 from physmotion.eval.physics_columns import imitation_columns, metric_surface, reset_columns, residual_columns
 from physmotion.generate import GenerateConfig, generate
-from physmotion.metrics import per_motion_metrics, physical_metrics
+from physmotion.metrics import physical_metrics
 from physmotion.physics.presets import preset
 from physmotion.pipelines.modes import PhysicsMode
 
@@ -52,12 +52,11 @@ def compare_modes(
     modes: Sequence[str | PhysicsMode],
     base: GenerateConfig | None = None,
     surface: str = "humanoid",
-) -> dict[str, dict]:
+) -> dict[str, dict[str, float]]:
     """Generate one motion per prompt in each mode; mode spelling -> physical metrics (mean over
     motions) plus ``seconds_per_motion``, ``tracked`` (fraction of all projections, PhysDiff's four per
-    motion included, in which the humanoid never fell), :func:`reset_columns`, :func:`imitation_columns`
-    and ``per_motion``: each motion's Phys-Err (mm) and resets, in prompt order (which motions a mean
-    comes from).
+    motion included, in which the humanoid never fell), :func:`reset_columns` and
+    :func:`imitation_columns`.
 
     surface "humanoid": the humanoid's geometry, with the body P simulated for projected outputs and one
     estimated from the joints otherwise; "joints": the joint-only surface model."""
@@ -70,10 +69,7 @@ def compare_modes(
         out = generate(list(prompts), cfg, model)
         seconds = time.perf_counter() - start
         joints = np.stack([m.joints for m in out.motions])
-        body = metric_surface(surface, out.bodies)
-        row: dict = physical_metrics(joints, FPS, body=body)
-        row["per_motion"] = {"phys_err": per_motion_metrics(joints, FPS, body=body)["phys_err"].tolist(),
-                             "resets": [m.resets for m in out.motions]}  # fmt: skip
+        row = physical_metrics(joints, FPS, body=metric_surface(surface, out.bodies))
         row["seconds_per_motion"] = seconds / len(prompts)
         log = out.projections
         row["tracked"] = float(np.mean(log.tracked)) if log.tracked else float("nan")
