@@ -2,7 +2,8 @@
 then P under the sampling preset and variants of it, each against its own plain sample.
 
 Usage: python -m experiments.flight_kept [--seeds 0,1,2] [--seconds 4] [--variants sampling,ballistic,...]
-       [--mode physdiff:end:2,space:1 --mode ...] [--fallback] [--recover] [--out results/flight_kept]
+       [--mode physdiff:end:2,space:1 --mode ...] [--mode-variant NAME ...] [--fallback] [--recover]
+       [--out results/flight_kept]
 
 Rows: each ``--mode`` (default: generate's default, PhysDiff with P at the last 2 steps) is ``generate``
 with that physics mode against the plain sample of the same prompt and seed; every other row is one P (as ``post:1``) of the plain samples under a variant of
@@ -49,6 +50,10 @@ def _variant(name: str):
         return replace(base, let_land=False, shaping=replace(base.shaping, ballistic_flight=True))
     if name == "lift_0.3":  # the lift cap up to the force cap
         return replace(base, tracking=replace(base.tracking, residual_lift=0.3))
+    if name == "feet_balance":  # the root wrench carried by the feet first, as in the plain P
+        return replace(base, tracking=replace(base.tracking, feet_balance=True))
+    if name == "feet_through_actuators":  # the same, those joint torques through the actuators' targets
+        return replace(base, tracking=replace(base.tracking, feet_balance=True, feet_through_actuators=True))
     if name == "fallback":  # the search where the tracker resets, fails or keeps under 0.8 of the flight
         return replace(base, fallback=True)
     if name == "no_recover":  # the tracker resets the body at once where it falls (the default before recover)
@@ -62,8 +67,8 @@ def _variant(name: str):
     raise ValueError(f"unknown variant {name!r}")
 
 
-VARIANTS = ("sampling", "ballistic", "no_land", "ballistic_no_land", "lift_0.3", "fallback", "no_recover",
-            "search", "search_velocity")
+VARIANTS = ("sampling", "ballistic", "no_land", "ballistic_no_land", "lift_0.3", "feet_balance", "feet_through_actuators",
+            "fallback", "no_recover", "search", "search_velocity")
 
 
 def _cpu_wall() -> np.ndarray:
@@ -81,10 +86,12 @@ def _cpu_wall() -> np.ndarray:
 
 
 def measure(seeds: list[int], seconds: float, variants: list[str], modes: list[str],
-            fallback: bool = False, recover: bool = False) -> dict[str, dict]:  # fmt: skip
+            fallback: bool = False, recover: bool = False,
+            mode_variants: tuple[str, ...] = ()) -> dict[str, dict]:  # fmt: skip
     """Row name -> figures (see the module docstring); with ``fallback``, each mode again with the search
     as the tracker's fallback (row "<mode> +fallback"); with ``recover``, again with the other setting of
-    the search carrying the body where the tracker would reset it (row "<mode> +recover" or "-recover")."""
+    the search carrying the body where the tracker would reset it (row "<mode> +recover" or "-recover");
+    for each of ``mode_variants``, again with that variant's P (row "<mode> [variant]")."""
     from experiments.prompts import NEW_PROMPTS
     from physmotion.diffusion.model import MotionDiffusion
     from physmotion.diffusion.physdiff import on_data_floor
@@ -109,6 +116,8 @@ def measure(seeds: list[int], seconds: float, variants: list[str], modes: list[s
                 runs[f"{mode} {'+' if on else '-'}recover"] = replace(cfg.projection, recover=on)
             if fallback:
                 runs[f"{mode} +fallback"] = replace(cfg.projection, fallback=True)
+            for name in mode_variants:
+                runs[f"{mode} [{name}]"] = _variant(name)
             for name, projection in runs.items():
                 start = _cpu_wall()
                 res = generate(prompts, replace(cfg, physics=mode, projection=projection), model=model)
@@ -149,18 +158,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--recover", action="store_true",
                         help="each --mode again with the other setting of ProjectionConfig.recover (the search "
                         "carrying the body where the tracker would reset it)")
+    parser.add_argument("--mode-variant", action="append", default=[],
+                        help="each --mode again with this variant's P in place of the sampling preset (repeatable)")
     parser.add_argument("--out", default=str(ROOT / "results" / "flight_kept"))
     args = parse_args(parser, argv)
 
     def run() -> tuple[str, list[Path]]:
         seeds = [int(s) for s in args.seeds.split(",")]
         variants = [v for v in args.variants.split(",") if v]
-        for v in variants:
+        for v in [*variants, *args.mode_variant]:
             _variant(v)  # a bad name fails before any work
         from physmotion.generate import GenerateConfig
 
         modes = args.mode if args.mode is not None else [str(GenerateConfig().physics)]
-        rows = measure(seeds, args.seconds, variants, [m for m in modes if m], args.fallback, args.recover)
+        rows = measure(seeds, args.seconds, variants, [m for m in modes if m], args.fallback, args.recover,
+                       tuple(args.mode_variant))
         meta = run_meta(__file__, argv, args.tree, {name: "sampling" for name in rows}, seeds=seeds, seconds=args.seconds)
         header = ["row", "flight kept (median)", "flying samples", "outputs with a reset", "jumps past the sample's",
                   "root force p95, W", "root torque p95, W m", "held at a cap", "Phys-Err, mm", "searched",

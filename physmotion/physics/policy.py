@@ -136,6 +136,7 @@ class PolicyController:
         self.policy = policy
         self.cap = float(cap)
         self.tracker = ModelBasedTracker(model, capped_tracking(policy.settings.tracking, self.cap))
+        self.joints_through_actuators = self.tracker.joints_through_actuators
 
     def act(self, data, ref: Reference, k: int) -> tuple[np.ndarray, np.ndarray]:
         ctrl, qfrc = self.tracker.act(data, ref, k)

@@ -262,9 +262,13 @@ def control_step(
     over = held = False
     cap_force, cap_lift, cap_torque = (_AT_CAP * c for c in controller.caps())
     limits = model.actuator_forcerange[:, 1]  # actuator i drives hinge dof 6 + i (humanoid.build_mjcf)
+    through, gains = getattr(controller, "joints_through_actuators", False), model.actuator_gainprm[:, 0]
     for s in range(every, config.substeps + 1, every):
         # The wrench held over simulation steps s - every + 1 .. s is the one ending at step s.
         applied = qfrc + controller.residual(data, ref, k * config.substeps + s, config.substeps)
+        if through:  # the joint torques as target offsets: the actuators' force range clips the total
+            data.ctrl[:] = ctrl + applied[6:] / gains
+            applied[6:] = 0.0
         data.qfrc_applied[:] = applied
         wrench = applied[:6]
         f, t = math.hypot(*wrench[:3]), math.hypot(*wrench[3:])

@@ -64,6 +64,11 @@ class TrackingConfig:
     # below 1 the feet carry more of the force and leave more torque to the residual, whose bound
     # (``residual_torque``) is the looser one.
     feet_torque_weight: float = 0.3
+    # Send those joint torques through the leg actuators' targets (torque / kp added to the target), so
+    # each actuator's force range clips its total; off, they are applied beside the actuators and a hinge's
+    # total can pass its limit (``over_limit``; docs/decisions/sampling.md: "the root wrench through the
+    # feet in generation").
+    feet_through_actuators: bool = False
 
 
 @dataclass
@@ -152,7 +157,9 @@ def _root_targets(ref: Reference, substeps: int) -> RootTargets:
 
 
 class Controller(Protocol):
-    """What a tracker (model-based or learned) provides to the simulation loop."""
+    """What a tracker (model-based or learned) provides to the simulation loop. One that sets
+    ``joints_through_actuators`` true has the joint torques :meth:`residual` returns put into the actuators'
+    targets (torque / kp), where their force range clips the total, instead of beside them."""
 
     def act(self, data, ref: Reference, k: int) -> tuple[np.ndarray, np.ndarray]:
         """Controls held over the control step k -> k+1: (ctrl (nu,), qfrc_applied (nv,))."""
@@ -269,6 +276,7 @@ class ModelBasedTracker:
         self._is_foot[feet] = True
         self._pyr = _pyramid(self.config.friction)
         self._fit_rows = np.array([1.0, 1.0, 1.0] + [self.config.feet_torque_weight] * 3)  # force, torque
+        self.joints_through_actuators = self.config.feet_balance and self.config.feet_through_actuators
 
     def caps(self) -> tuple[float, float, float]:
         """Force, lift (N) and torque (N m) bounds of the root residual."""
