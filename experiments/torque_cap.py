@@ -14,14 +14,37 @@ whether the intervals overlap.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from experiments._results import ROOT, heading, markdown_table, parse_args, report, run_meta, write_results
+
+if TYPE_CHECKING:
+    from physmotion.eval.table import EvalTable
 
 MODES = ("none", "post:1", "physdiff:end:2,space:1")
 FIGURES = ("phys_err", "penetrate", "float", "skate", "FID", "R@3", "flight_kept", "step_jumps", "reset_rate",
            "fell", "residual_force_p95", "residual_torque_p95", "residual_at_cap")  # fmt: skip
+
+
+def compare(base: EvalTable, table: EvalTable, modes: Sequence[str], figures: Sequence[str],
+            names: tuple[str, str] = ("before", "after")) -> tuple[list[list[str]], dict]:  # fmt: skip
+    """Each figure of each mode in both tables: markdown rows (mode, figure, both means ± 95 % half-widths,
+    whether the intervals overlap) and the same as a dict keyed by ``names``; figures either lacks are left
+    out."""
+    rows, out = [], {}
+    for mode in modes:
+        for fig in figures:
+            old, new = base.rows[mode].get(fig), table.rows[mode].get(fig)
+            if old is None or new is None:
+                continue
+            overlap = abs(new[0] - old[0]) <= new[1] + old[1]
+            out.setdefault(mode, {})[fig] = {names[0]: old, names[1]: new, "intervals_overlap": overlap}
+            rows.append([mode, fig, f"{old[0]:.3f} ± {old[1]:.3f}", f"{new[0]:.3f} ± {new[1]:.3f}",
+                         "yes" if overlap else "**no**"])  # fmt: skip
+    return rows, out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -48,16 +71,7 @@ def main(argv: list[str] | None = None) -> int:
         cfg = EvaluateConfig(modes=MODES, repeats=base.meta["repeats"], seed=base.meta["seed"], real_row=False,
                              base=generate)  # fmt: skip
         table = evaluate(model, judge, args.data, cfg)
-        rows, out = [], {}
-        for mode in MODES[1:]:
-            for fig in FIGURES:
-                old, new = base.rows[mode].get(fig), table.rows[mode].get(fig)
-                if old is None or new is None:
-                    continue
-                overlap = abs(new[0] - old[0]) <= new[1] + old[1]
-                out.setdefault(mode, {})[fig] = {"default": old, "cap": new, "intervals_overlap": overlap}
-                rows.append([mode, fig, f"{old[0]:.3f} ± {old[1]:.3f}", f"{new[0]:.3f} ± {new[1]:.3f}",
-                             "yes" if overlap else "**no**"])  # fmt: skip
+        rows, out = compare(base, table, MODES[1:], FIGURES, names=("default", "cap"))
         meta = run_meta(__file__, argv, args.tree, "sampling", cap=args.cap, baseline=args.baseline,
                         baseline_commit=base.meta.get("commit"))  # fmt: skip
         header = ["mode", "figure", "torque cap 1 W m (default)", f"torque cap {args.cap:g} W m", "intervals overlap"]
