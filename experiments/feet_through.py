@@ -42,14 +42,16 @@ def main(argv: list[str] | None = None) -> int:
         through = replace(preset, projection=replace(preset.projection, tracking=tracking))
         tables = {}
         for name, base in (("preset", preset), ("through", through)):
-            cfg = EvaluateConfig(modes=MODES, repeats=args.repeats, max_motions=args.max_motions, real_row=False,
-                                 base=base)  # fmt: skip
+            cfg = EvaluateConfig(modes=MODES, repeats=args.repeats, max_motions=args.max_motions,
+                                 real_row=False, base=base)  # fmt: skip
             tables[name] = evaluate(model, judge, args.data, cfg)
         rows, out = compare(tables["preset"], tables["through"], MODES[1:], FIGURES + _MORE)
-        meta = run_meta(__file__, argv, args.tree, "sampling", repeats=args.repeats, max_motions=args.max_motions)
+        meta = run_meta(__file__, argv, args.tree, "sampling", repeats=args.repeats,
+                        max_motions=args.max_motions)  # fmt: skip
         header = ["mode", "figure", "sampling preset (the default)", "feet through the actuators",
                   "intervals overlap"]  # fmt: skip
-        md = heading("Generation's P with the root wrench carried by the feet through the leg actuators", meta)
+        title = "Generation's P with the root wrench carried by the feet through the leg actuators"
+        md = heading(title, meta)
         md += markdown_table(header, rows)
         payload = {"meta": meta, "rows": out, "tables": {k: t.rows for k, t in tables.items()}}
         return md, write_results(args.out, md, payload)

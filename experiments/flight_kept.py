@@ -67,8 +67,8 @@ def _variant(name: str):
     raise ValueError(f"unknown variant {name!r}")
 
 
-VARIANTS = ("sampling", "ballistic", "no_land", "ballistic_no_land", "lift_0.3", "feet_balance", "feet_through_actuators",
-            "fallback", "no_recover", "search", "search_velocity")
+VARIANTS = ("sampling", "ballistic", "no_land", "ballistic_no_land", "lift_0.3", "feet_balance",
+            "feet_through_actuators", "fallback", "no_recover", "search", "search_velocity")
 
 
 def _cpu_wall() -> np.ndarray:
@@ -159,7 +159,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="each --mode again with the other setting of ProjectionConfig.recover (the search "
                         "carrying the body where the tracker would reset it)")
     parser.add_argument("--mode-variant", action="append", default=[],
-                        help="each --mode again with this variant's P in place of the sampling preset (repeatable)")
+                        help="each --mode again with this variant's P in place of the sampling preset "
+                        "(repeatable)")
     parser.add_argument("--out", default=str(ROOT / "results" / "flight_kept"))
     args = parse_args(parser, argv)
 

@@ -176,7 +176,8 @@ def test_feet_balance_through_the_actuators_keeps_every_hinge_within_its_limit(m
     run = import_clip(clip, floor="frame0").joints.astype(np.float64)[None, :60]
     plain = ProjectionConfig()
     beside = project(run, config=plain)
-    through = project(run, config=replace(plain, tracking=replace(plain.tracking, feet_through_actuators=True)))
+    through_actuators = replace(plain.tracking, feet_through_actuators=True)
+    through = project(run, config=replace(plain, tracking=through_actuators))
     assert beside.over_limit.mean() > 0.1 and not through.over_limit.any()
     assert beside.success.all() and through.success.all() and through.mpjpe.mean() < 0.1
     assert np.abs(through.residual_force).max() <= plain.tracking.residual_force + 1e-6
