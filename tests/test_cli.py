@@ -331,3 +331,21 @@ def test_data_build_refuses_other_feature_widths(mocap_dir: Path, tmp_path: Path
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and "263 or 329" in lines[0], res.stderr
     assert not out.exists() or not list(out.iterdir())
+
+
+def test_long_work_reports_plain_progress_lines_when_not_on_a_terminal() -> None:
+    """Under nohup or CI the bar is not drawn: a plain line a minute at most, none in the first minute."""
+    import io
+
+    from physmotion.cli._common import _PlainProgress
+
+    now = [0.0]
+    out = io.StringIO()
+    tick = _PlainProgress("evaluating", clock=lambda: now[0], stream=out)
+    for step, t in enumerate((10.0, 59.0, 61.0, 90.0, 3725.0), start=1):
+        now[0] = t
+        tick(step * 100, 1000)
+    assert out.getvalue().splitlines() == [
+        "evaluating: 300/1000, 1:01 elapsed, about 2:22 left",
+        "evaluating: 500/1000, 1:02:05 elapsed, about 1:02:05 left",
+    ]

@@ -157,8 +157,39 @@ def _with(config, **given):
     return replace(config, **{k: v for k, v in given.items() if v is not None})
 
 
+class _PlainProgress:
+    """Progress as a plain stderr line for a log file (not a TTY): at most one per ``every`` seconds, the
+    first after ``every`` seconds, so a short run prints nothing and an hour-long ``evaluate`` under
+    ``nohup`` says how far it is. ``clock`` and ``stream`` are for tests."""
+
+    def __init__(self, label: str, every: float = 60.0, clock=None, stream=None) -> None:
+        import time
+
+        self.label, self.every = label, every
+        self.clock = clock or time.monotonic
+        self.stream = stream or sys.stderr
+        self.start = self.last = self.clock()
+
+    def __call__(self, done: int, total: int | None) -> None:
+        now = self.clock()
+        if now - self.last < self.every:
+            return
+        self.last = now
+        elapsed = now - self.start
+        line = f"{self.label}: {done}" + (f"/{total}" if total else "") + f", {_clock(elapsed)} elapsed"
+        if total and 0 < done < total:
+            line += f", about {_clock(elapsed * (total - done) / done)} left"
+        print(line, file=self.stream, flush=True)
+
+
+def _clock(seconds: float) -> str:
+    minutes, secs = divmod(int(round(seconds)), 60)
+    return f"{minutes // 60}:{minutes % 60:02d}:{secs:02d}" if minutes >= 60 else f"{minutes}:{secs:02d}"
+
+
 def _step_bar(label: str):
-    """A context manager yielding tick(done, total) that drives a rich progress bar (silent if not a TTY)."""
+    """A context manager yielding tick(done, total): a rich progress bar on a TTY, otherwise a plain line
+    a minute at most (:class:`_PlainProgress`)."""
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -170,12 +201,14 @@ def _step_bar(label: str):
 
     @contextmanager
     def bar():
+        if not sys.stderr.isatty():
+            yield _PlainProgress(label)
+            return
         # The label (a file name) is the task's description, not the column's format string: a "{" in a
         # path would break str.format, and "[..]" or ":fire:" would be read as markup or emoji.
         progress = Progress(TextColumn("{task.description}", markup=False), BarColumn(), MofNCompleteColumn(),
                             TimeElapsedColumn(), TimeRemainingColumn(),
-                            console=Console(stderr=True, emoji=False, markup=False),
-                            disable=not sys.stderr.isatty())  # fmt: skip
+                            console=Console(stderr=True, emoji=False, markup=False))  # fmt: skip
         with progress:
             task = progress.add_task(label, total=None)
             yield lambda done, total: progress.update(task, completed=done, total=total)
