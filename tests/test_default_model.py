@@ -90,28 +90,27 @@ def test_standing_actions_stay_in_place(stats) -> None:
         assert stats[p]["speed"] < 0.5 * stats["walk"]["speed"], p
 
 
-@pytest.mark.slow
+@pytest.mark.slow  # 32 prompts of 6 s in four modes with the shipped model (about 12 min on 2 cores)
 def test_physics_modes_match_the_recorded_bench(model: MotionDiffusion) -> None:
-    """32 prompts, 6 s, seed 0, every mode of experiments/physdiff_quality.py, against seed 0 of
+    """32 prompts, 6 s, seed 0, the modes of experiments/physdiff_quality.py but post:4, against seed 0 of
     results/physdiff_quality.json, whose three-seed means the README and the model card quote
     (tests/test_results.py). Generation is deterministic; the margin allows another CPU's rounding in
-    the simulation. PhysDiff must beat the grounded baseline and post-processing, not only ``none``."""
+    the simulation. PhysDiff must beat the grounded baseline, not only ``none``, and the recorded post:4.
+    post:4 itself (four chained projections, 20 s a motion) is not reproduced here: it was 11 of the
+    suite's 37 min (tests/README.md)."""
     from experiments.physdiff_quality import compare_modes
     from experiments.prompts import PHYSICS_PROMPTS
 
     recorded = json.loads((Path(__file__).parents[1] / "results" / "physdiff_quality.json").read_text())
     assert recorded["meta"]["seeds"][0] == 0 and recorded["meta"]["prompts"] == len(PHYSICS_PROMPTS)
-    expected = recorded["runs"][0]
+    expected = {mode: row for mode, row in recorded["runs"][0].items() if mode != "post:4"}
     res = compare_modes(model, PHYSICS_PROMPTS, list(expected))
-    # Four chained projections, each with resets, amplify rounding: post:4 read 11.46 mm on the AVX2 CPU
-    # that recorded the bench, 10.02 and 9.95 mm in two runs on an AVX-512 one (a pytest session and a
-    # script), where the other modes agreed to 0.5 %.
-    margin = {"post:4": 0.25}
     for mode, row in expected.items():
-        assert res[mode]["phys_err"] == pytest.approx(row["phys_err"], rel=margin.get(mode, 0.1)), mode
+        assert res[mode]["phys_err"] == pytest.approx(row["phys_err"], rel=0.1), mode
     err = {mode: row["phys_err"] for mode, row in res.items()}
     physdiff = err["physdiff:end:4,space:1"]
-    assert physdiff < err["post:4"] and physdiff < err["none+floor"] < err["none"]
+    assert physdiff < err["none+floor"] < err["none"]
+    assert physdiff < recorded["runs"][0]["post:4"]["phys_err"]
 
 
 @pytest.mark.slow  # 4 verbs x 3 prompts x 3 seeds of 4 s, plain sampling (about 30 s)
