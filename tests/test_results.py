@@ -440,7 +440,11 @@ def flight_fly_quotes() -> list[str]:
     old, new = rows[END2], rows[DEFAULT_PHYSDIFF]
     return [f"{old['flight_kept']:.2f} of the sample's flight", f"now keeps {new['flight_kept']:.2f}",
             f"resets {100 * new['with_reset']:.0f} % of jump and hop outputs "
-            f"(before: {100 * old['with_reset']:.0f} %)"]
+            f"(before: {100 * old['with_reset']:.0f} %)",
+            f"the search carrying {100 * new['recovered']:.0f} % of them "
+            f"(before: {100 * old['recovered']:.0f} %)",
+            f"{100 * new['step_jumps']:.0f} % of them jump past the sample's "
+            f"(before: {100 * old['step_jumps']:.0f} %)"]
 
 
 def flight_search_quotes() -> list[str]:
