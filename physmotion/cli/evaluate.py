@@ -55,11 +55,14 @@ def evaluate_cmd(
 ) -> None:
     """Generation metrics (our evaluator) and physical metrics per physics mode, as the papers' tables.
 
-    Unset options take EvaluateConfig's defaults (the values the help quotes)."""
+    Each finished (mode, repeat) run is kept in <out>.parts until the table is written, so a killed
+    evaluation, run again with the same command, resumes. Unset options take EvaluateConfig's defaults
+    (the values the help quotes)."""
     from physmotion.diffusion.model import MotionDiffusion
     from physmotion.diffusion.samplers import default_sampler
     from physmotion.eval.evaluator import Evaluator
-    from physmotion.eval.table import EvaluateConfig, evaluate, table_paths
+    from physmotion.eval.parts import count_parts, remove_parts
+    from physmotion.eval.table import EvaluateConfig, evaluate, parts_folder, table_paths
     from physmotion.pipelines.modes import parse_modes
 
     for written in table_paths(out):  # EvalTable.write's names
@@ -76,8 +79,13 @@ def evaluate_cmd(
         cfg.base = cfg.base.with_search_fallback(True)
     if recover is not None:
         cfg.base = cfg.base.with_search_recovery(recover)
+    parts = parts_folder(out)
+    if found := count_parts(parts):
+        typer.echo(f"{parts}: {found} finished run(s) of an earlier evaluation; those made with these "
+                   "settings are reused", err=True)
     with _step_bar("evaluating") as tick, _as_options(**SAMPLER_OPTIONS):
-        table = evaluate(net, judge, data, cfg, on_progress=tick)
+        table = evaluate(net, judge, data, cfg, on_progress=tick, parts=parts)
     paths = table.write(out)
+    remove_parts(parts)
     console.print(table.to_markdown(), highlight=False, markup=False, emoji=False)
     console.print("wrote " + ", ".join(str(p) for p in paths), highlight=False)

@@ -52,6 +52,7 @@ from physmotion.diffusion.model import MotionDiffusion
 from physmotion.diffusion.physdiff import joints_to_features, on_data_floor, projection_settings
 from physmotion.errors import PhysmotionError
 from physmotion.eval.evaluator import Evaluator
+from physmotion.eval.parts import RunParts, digest, model_digest
 from physmotion.eval.physics_columns import imitation_columns, metric_surface, reset_columns, residual_columns
 from physmotion.features.humanml3d import recover_from_ric
 from physmotion.generate import GenerateConfig, generate
@@ -161,14 +162,25 @@ def table_paths(stem: str | Path) -> tuple[Path, Path]:
     return stem.with_name(stem.name + ".md"), stem.with_name(stem.name + ".json")
 
 
+def parts_folder(stem: str | Path) -> Path:
+    """Where a run writing ``<stem>.md``/``.json`` keeps its finished runs until then: ``<stem>.parts``."""
+    md, _ = table_paths(stem)
+    return md.with_name(md.name[: -len(".md")] + ".parts")
+
+
 def evaluate(
     model: MotionDiffusion,
     evaluator: Evaluator,
     data: str | Path,
     config: EvaluateConfig | None = None,
     on_progress: Callable[[int, int], None] | None = None,
+    parts: str | Path | None = None,
 ) -> EvalTable:
-    """The table for ``config.modes`` on ``data``'s split, with a real-data row first."""
+    """The table for ``config.modes`` on ``data``'s split, with a real-data row first.
+
+    ``parts``: a folder where each (mode, repeat) run is saved as it finishes and reused when this is
+    called again with the same model, data and settings (:mod:`physmotion.eval.parts`), so a killed run
+    resumes; the caller removes it once the table is written."""
     cfg = config or EvaluateConfig()
     modes = [PhysicsMode.parse(m) for m in cfg.modes]  # bad modes and sampler settings fail before any work
     cfg.base.sampler.check()
@@ -184,6 +196,11 @@ def evaluate(
     text_emb = evaluator.encode_texts(captions)
     metric_surface(cfg.surface)  # a bad name fails before any work
     total, done = cfg.repeats * len(items) * len(cfg.modes), 0
+    store = None
+    if parts is not None:
+        settings = {k: v for k, v in asdict(cfg).items() if k not in ("modes", "repeats", "base", "real_row")}
+        common = digest(model_digest(model), real_emb, text_emb, settings, "none" in gen_configs)
+        store = RunParts(parts, common)
 
     rows: dict[str, dict[str, tuple[float, float]]] = {}
     plain: dict[int, list[np.ndarray]] = {}  # repeat -> the none row's samples, for what the others kept
@@ -200,18 +217,26 @@ def evaluate(
                 if on_progress:
                     on_progress(_done + n, total)
 
-            joints, bodies, seconds, resets = _generate(model, captions, items, run_cfg, cfg.generate_batch,
-                                                        tick)
+            key = store.key(mode, r, run_cfg) if store else ""
+            saved = store.load(mode, r, key) if store else None
+            if saved is not None:
+                run, emb, joints = saved
+                tick(len(items))
+            else:
+                joints, bodies, seconds, resets = _generate(model, captions, items, run_cfg,
+                                                            cfg.generate_batch, tick)
+                emb = evaluator.encode_motions([joints_to_features(on_data_floor(j)) for j in joints])
+                run = _scores(emb, text_emb, real_emb, r, cfg)
+                run.update(ragged_physical_metrics(joints, FPS, body=metric_surface(cfg.surface, bodies)))
+                run["sec/motion"] = seconds / len(items)
+                run.update(resets)
+                if mode != "none" and r in plain:
+                    run.update(_kept(joints, plain[r]))
+                if store:
+                    store.save(mode, r, key, run, emb, joints if mode == "none" else None)
             done += len(items)
-            emb = evaluator.encode_motions([joints_to_features(on_data_floor(j)) for j in joints])
-            run = _scores(emb, text_emb, real_emb, r, cfg)
-            run.update(ragged_physical_metrics(joints, FPS, body=metric_surface(cfg.surface, bodies)))
-            run["sec/motion"] = seconds / len(items)
-            run.update(resets)
             if mode == "none":
                 plain[r] = joints
-            elif r in plain:
-                run.update(_kept(joints, plain[r]))
             runs.append(run)
             per_text.append(emb)
         rows[mode] = _summarise(runs, np.stack(per_text, axis=1) if cfg.repeats > 1 else None)

@@ -14,6 +14,17 @@ def test_evaluate_quick_writes_markdown_and_json(tiny_model_dir, tiny_evaluator_
     data = json.loads(out.with_suffix(".json").read_text())
     assert set(data["rows"]) == {"real", "none", "post:1"} and data["meta"]["motions"] == 32
     assert data["meta"]["sampler"]["eta"] == 1.0 and data["meta"]["sampler"]["steps"] == 10
+    assert sorted(p.name for p in out.parent.iterdir()) == ["quick.json", "quick.md"]  # quick.parts removed
+    # A run killed before its table: the same command resumes from its saved runs and says so.
+    parts = out.parent / "quick.parts"
+    parts.mkdir()
+    (parts / "none_r0.npz").write_bytes(b"cut short")  # unreadable: computed again, not reused
+    res = run("evaluate", "--data", built_dir, "--model", tiny_model_dir, "--evaluator", tiny_evaluator_dir,
+              "--physics", "none", "--quick", "--eta", "1", "-o", out, "--overwrite")
+    assert res.returncode == 0, res.stderr
+    assert "quick.parts: 1 finished run(s) of an earlier evaluation" in res.stderr
+    again = json.loads(out.with_suffix(".json").read_text())["rows"]["none"]
+    assert again["FID"] == data["rows"]["none"]["FID"] and not parts.exists()
 
 
 def test_evaluate_bad_input_is_one_line(tiny_model_dir, tiny_evaluator_dir, built_dir, tmp_path):

@@ -1,6 +1,7 @@
 """The evaluation table: mode parsing, the real-data row, and a quick run with real (tiny) models."""
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -105,3 +106,42 @@ def test_bad_modes_fail_before_any_work(tiny_model, tiny_evaluator, built_dir):
             evaluate(tiny_model, tiny_evaluator, built_dir, EvaluateConfig(modes=modes))
     with pytest.raises(PhysmotionError, match="no split"):
         evaluate(tiny_model, tiny_evaluator, built_dir, EvaluateConfig(split="nosuch"))
+
+
+def test_a_killed_evaluation_resumes_from_its_finished_runs(quick_table, tiny_model, tiny_evaluator,
+                                                           built_dir, tmp_path):
+    """A run stopped after its plain modes resumes from the saved runs: it generates only the rest, and its
+    table is the uninterrupted one's (seconds per motion aside, which are timed anew)."""
+    from physmotion.eval.parts import count_parts
+
+    base = GenerateConfig(sampler=SamplerConfig(steps=5), projection=ProjectionConfig.sampling(recover=False))
+    cfg = EvaluateConfig(modes=tuple(m for m in quick_table.rows if m != REAL), repeats=2, max_motions=32,
+                         base=base)
+    plain_work = 2 * 2 * 32  # none and none+floor, 2 repeats of 32 motions
+
+    class Killed(Exception):
+        pass
+
+    def kill_after_the_plain_modes(done: int, total: int) -> None:
+        if done > plain_work:
+            raise Killed
+
+    parts = tmp_path / "eval.parts"
+    with pytest.raises(Killed):
+        evaluate(tiny_model, tiny_evaluator, built_dir, cfg, on_progress=kill_after_the_plain_modes,
+                 parts=parts)
+    assert count_parts(parts) == 4
+    seen: list[int] = []
+    table = evaluate(tiny_model, tiny_evaluator, built_dir, cfg, on_progress=lambda d, t: seen.append(d),
+                     parts=parts)
+    assert seen[:4] == [32, 64, 96, 128]  # the four saved runs, each reported whole, none generated
+    assert count_parts(parts) == 8
+    for row, values in quick_table.rows.items():
+        for metric, value in values.items():
+            if metric != "sec/motion":
+                assert table.rows[row][metric] == pytest.approx(value, rel=1e-9, abs=1e-12), (row, metric)
+    # Another seed decides other runs: none of the saved ones is reused.
+    seen.clear()
+    evaluate(tiny_model, tiny_evaluator, built_dir, replace(cfg, seed=1, modes=("none",), repeats=1),
+             on_progress=lambda d, t: seen.append(d), parts=parts)
+    assert seen == [16, 32]  # generated again, in two sampling batches
