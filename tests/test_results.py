@@ -189,8 +189,9 @@ def new_prompts_recovery_quotes() -> list[str]:
     def mean(runs: dict, mode: str, key: str, cats: list[str] | None = None) -> float:
         return float(np.mean([r[mode][key] for c in cats or runs for r in runs[c]]))
 
-    same = [c for c in after if np.allclose([r["none"]["phys_err"] for r in before[c]],
-                                            [r["none"]["phys_err"] for r in after[c]], atol=1e-3)]  # fmt: skip
+    plain = {c: ([r["none"]["phys_err"] for r in before[c]], [r["none"]["phys_err"] for r in after[c]])
+             for c in after}  # fmt: skip
+    same = [c for c, (was, now) in plain.items() if np.allclose(was, now, atol=1e-3)]
     assert len(same) == 7, same  # turns and standing changed with the flat hand
     fast = ["run", "jog", "jump", "hop", "kick"]
     fell = [100 * (1 - mean(runs, PHYSDIFF, "tracked")) for runs in (before, after)]
