@@ -187,7 +187,7 @@ def new_prompts_recovery_quotes() -> list[str]:
     after = _load("new_prompts_default.json")["runs"]
 
     def mean(runs: dict, mode: str, key: str, cats: list[str] | None = None) -> float:
-        return float(np.mean([r[mode][key] for c in cats or runs for r in runs[c]]))
+        return _prompts_mean({c: runs[c] for c in cats or runs}, mode, key)
 
     plain = {c: ([r["none"]["phys_err"] for r in before[c]], [r["none"]["phys_err"] for r in after[c]])
              for c in after}  # fmt: skip
