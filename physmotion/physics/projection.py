@@ -28,8 +28,8 @@ from physmotion.conventions import FPS
 from physmotion.errors import ShapeError
 from physmotion.features.biomech import FEATURE_DIM_BIOMECH, to_263
 from physmotion.features.humanml3d import FEATURE_DIM, recover_from_ric
-from physmotion.physics.humanoid import HumanoidConfig, body_from_joints, build_model, foot_lift
-from physmotion.physics.retarget import joints_to_qpos, qpos_to_joints
+from physmotion.physics.humanoid import HumanoidConfig, body_from_joints, build_model, foot_lift, layout
+from physmotion.physics.retarget import joints_to_qpos, qpos_to_joints, reach_arm_ends
 from physmotion.physics.search import SearchConfig, SearchController, search_humanoid
 from physmotion.physics.shaping import ShapingConfig, shape_reference
 from physmotion.physics.surface import body_lowest, pose_frames
@@ -114,6 +114,10 @@ class ProjectionConfig:
     # output carries the jump (docs/decisions/sampling.md: "P starts from the motion's own path").
     mend_first_frame: bool = False
     first_frame_margin: float = 0.02  # m
+    # Fit each arm to the body's bone lengths with its wrist kept (``retarget.reach_arm_ends``) before the
+    # bone directions are copied: a generated arm whose bones change length otherwise swings its wrist
+    # faster than the motion does (docs/decisions/projection.md: "arms fitted to the body's bones").
+    reach_arms: bool = True
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.crossfade <= 2.0:
@@ -431,7 +435,8 @@ def prepare_motion(x: np.ndarray, fps: float, config: ProjectionConfig) -> Prepa
     body = body_from_joints(x, fps)
     model = build_model(body, config.humanoid)
     lift = foot_lift(body, config.humanoid)
-    qpos = resample_qpos(joints_to_qpos(x, model, lift=lift, config=config.humanoid), fps, ctrl_fps)
+    arms = reach_arm_ends(x, layout(model).offsets) if config.reach_arms else x
+    qpos = resample_qpos(joints_to_qpos(arms, model, lift=lift, config=config.humanoid), fps, ctrl_fps)
     grounded = _grounded(model, qpos, ctrl_fps, config)
     target = shape_reference(model, qpos, config.humanoid.control_dt, config.shaping)
     return PreparedMotion(body, model, lift, target, grounded)

@@ -104,3 +104,23 @@ def real_walk(mocap_dir: Path) -> np.ndarray:
     clips = {c.clip: c for c in load_manifest(mocap_dir)}
     # P's input convention, which these tests were written for (the importer's default grounds the soles)
     return import_clip(clips[REAL_WALK], floor="frame0").joints.astype(np.float64)
+
+
+def shrunk_upper_arms(joints: np.ndarray, start: int = 20, frames: int = 4, depth: float = 0.08) -> np.ndarray:
+    """joints (T, 22, 3) with both elbows slid up their upper arms by a sine bump of ``depth`` metres over
+    ``frames`` frames from ``start``, the wrists where they were: arm bones that change length, as in a
+    generated motion (a reach's upper arm measured 26.6 -> 19.1 cm -> 26.6 cm over six frames)."""
+    out = joints.copy()
+    bump = np.zeros(len(joints))
+    bump[start : start + frames] = depth * np.sin(np.pi * (np.arange(frames) + 0.5) / frames)
+    for shoulder, elbow in (("left_shoulder", "left_elbow"), ("right_shoulder", "right_elbow")):
+        s, e = JOINT_INDEX[shoulder], JOINT_INDEX[elbow]
+        bone = out[:, e] - out[:, s]
+        out[:, e] -= bone / np.linalg.norm(bone, axis=-1, keepdims=True) * bump[:, None]
+    return out
+
+
+def wrist_error(a: np.ndarray, b: np.ndarray) -> float:
+    """Largest distance (m) between the wrists of a and b (T, 22, 3), each taken from its own pelvis."""
+    w = [JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"]]
+    return float(np.linalg.norm((a[:, w] - a[:, :1]) - (b[:, w] - b[:, :1]), axis=-1).max())

@@ -12,14 +12,30 @@ from physmotion.errors import ShapeError
 from physmotion.features.humanml3d import extract_features
 from physmotion.metrics import physical_metrics
 from physmotion.physics.humanoid import body_from_joints
-from physmotion.physics.projection import ProjectionConfig, project
+from physmotion.physics.projection import ProjectionConfig, prepare_motion, project, resample_qpos
+from physmotion.physics.retarget import qpos_to_joints
 from physmotion.physics.surface import HumanoidSurface
+
+from .conftest import shrunk_upper_arms, wrist_error
 
 
 @pytest.fixture(scope="module")
 def walk(real_walk: np.ndarray) -> np.ndarray:
     """4 s of Bandai's normal walk (80, 22, 3), data convention (floor at the lowest joint)."""
     return real_walk[:80]
+
+
+def test_p_keeps_the_wrists_of_arms_whose_bones_change_length(real_walk: np.ndarray) -> None:
+    """P's reference fits the arms to the body's bones (``reach_arms``, on by default): with the elbows slid
+    8 cm up the upper arms for four frames, its wrists stay on the motion's; copying the bones' directions,
+    as before, put them 3-4 cm off and swung them faster than the motion (issue 62's frame jumps)."""
+    moved = shrunk_upper_arms(real_walk[:60])
+    errors = {}
+    for on in (True, False):
+        prep = prepare_motion(moved, 20.0, replace(ProjectionConfig.sampling(), reach_arms=on))
+        ref = qpos_to_joints(resample_qpos(prep.target, 30.0, 20.0, count=len(moved)), prep.model)
+        errors[on] = wrist_error(ref[10:35], moved[10:35])
+    assert errors[True] < 0.01 < 0.03 < errors[False]
 
 
 def test_tracks_a_real_walk(walk: np.ndarray) -> None:

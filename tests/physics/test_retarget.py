@@ -8,17 +8,18 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from physmotion.errors import ShapeError
-from physmotion.physics.humanoid import build_model, foot_lift, layout
-from physmotion.physics.retarget import NQ, NV, joints_to_qpos, qpos_to_joints, qvel_from_qpos
+from physmotion.physics.humanoid import body_from_joints, build_model, foot_lift, layout
+from physmotion.physics.retarget import NQ, NV, joints_to_qpos, qpos_to_joints, qvel_from_qpos, reach_arm_ends
 from physmotion.skeleton import (
     JOINT_INDEX,
     REST_OFFSETS,
     bone_lengths,
     forward_kinematics,
     offsets_from_joints,
+    unit_vectors,
 )
 
-from .conftest import gait_joints, gait_rotations
+from .conftest import gait_joints, gait_rotations, shrunk_upper_arms, wrist_error
 
 DT = 1.0 / 20.0
 _REST_QPOS = np.tile(np.r_[0.0, 0.0, 0.9, 1.0, np.zeros(66)], (4, 1))  # (4, 70) valid qpos
@@ -152,6 +153,44 @@ def test_real_walk_round_trip_and_continuity(real_walk: np.ndarray, default_mode
     # the default body on this subject: reported, loosely bounded
     back = qpos_to_joints(joints_to_qpos(real_walk, default_model), default_model)
     assert np.linalg.norm(back - real_walk, axis=-1).mean() < 0.15
+
+
+def test_a_captured_clips_arms_are_left_as_they_are(real_walk: np.ndarray) -> None:
+    """Rigid captured bones are within the length tolerance: the fit returns the clip bit for bit."""
+    model = build_model(body_from_joints(real_walk))
+    assert np.array_equal(reach_arm_ends(real_walk, layout(model).offsets), real_walk)
+
+
+def test_arms_whose_bones_change_length_are_refitted_with_their_wrists_kept(real_walk: np.ndarray) -> None:
+    """Elbows slid 8 cm up their upper arms for four frames of a real walk: the fit puts them back where
+    the walk had them (the two-bone solution nearest the moved elbow), so the humanoid's wrists stay on the
+    motion's; copying the moved bones' directions puts its wrists 3-4 cm off."""
+    model = build_model(body_from_joints(real_walk))
+    moved = shrunk_upper_arms(real_walk)
+    fitted = reach_arm_ends(moved, layout(model).offsets)
+    assert _max_err(fitted, real_walk) < 1e-5
+    copied = qpos_to_joints(joints_to_qpos(moved, model), model)
+    assert wrist_error(copied, moved) > 0.03
+    kept = qpos_to_joints(joints_to_qpos(fitted, model), model)
+    assert wrist_error(kept, moved) < 1e-4
+
+
+def test_a_straight_arm_too_short_for_the_body_is_not_bent() -> None:
+    """Straight arms 10 % shorter than the body's: the body's arm stays straight (pointing at the wrist,
+    reaching past it) rather than bending in a plane the motion does not show."""
+    joints = gait_joints(REST_OFFSETS, 30)
+    for side in ("left", "right"):
+        s, e, w = (JOINT_INDEX[f"{side}_{part}"] for part in ("shoulder", "elbow", "wrist"))
+        along = unit_vectors(joints[:, e] - joints[:, s])
+        joints[:, e] = joints[:, s] + 0.9 * np.linalg.norm(REST_OFFSETS[e]) * along
+        joints[:, w] = joints[:, e] + 0.9 * np.linalg.norm(REST_OFFSETS[w]) * along
+    fitted = reach_arm_ends(joints, REST_OFFSETS)
+    for side in ("left", "right"):
+        s, e, w = (JOINT_INDEX[f"{side}_{part}"] for part in ("shoulder", "elbow", "wrist"))
+        upper, fore = fitted[:, e] - fitted[:, s], fitted[:, w] - fitted[:, e]
+        assert np.allclose(unit_vectors(upper), unit_vectors(fore), atol=1e-6)
+        assert np.allclose(np.linalg.norm(upper, axis=-1), np.linalg.norm(REST_OFFSETS[e]))
+        assert np.allclose(np.linalg.norm(fore, axis=-1), np.linalg.norm(REST_OFFSETS[w]))
 
 
 def test_lift_moves_the_root_and_comes_off_again(walk: np.ndarray) -> None:
