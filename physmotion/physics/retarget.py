@@ -315,8 +315,9 @@ def reach_arm_ends(joints: np.ndarray, offsets: np.ndarray) -> np.ndarray:
         r = np.linalg.norm(d, axis=-1)
         fit = (blend > 0) & (r > 1e-6) & (n1 > 1e-6) & (n2 > 1e-6)
         u = d / np.maximum(r, 1e-12)[:, None]
-        own = np.arccos(np.clip(np.sum(a1 * a2, -1) / np.maximum(n1 * n2, 1e-12), -1.0, 1.0))  # the motion's bend
-        reach = np.arccos(np.clip((r**2 - upper**2 - fore**2) / (2 * upper * fore), -1.0, 1.0))  # bend to reach
+        # the motion's own elbow bend, and the bend at which the body's arm reaches the wrist
+        own = np.arccos(np.clip(np.sum(a1 * a2, -1) / np.maximum(n1 * n2, 1e-12), -1.0, 1.0))
+        reach = np.arccos(np.clip((r**2 - upper**2 - fore**2) / (2 * upper * fore), -1.0, 1.0))
         bend = np.minimum(reach, own + _EXTRA_BEND * np.clip(own / _TRUSTED_BEND, 0.0, 1.0))
         span = np.sqrt(upper**2 + fore**2 + 2 * upper * fore * np.cos(bend))  # shoulder to wrist, fitted
         side = a1 - np.sum(a1 * u, -1, keepdims=True) * u  # the motion's elbow off the shoulder-wrist line

@@ -106,7 +106,8 @@ def real_walk(mocap_dir: Path) -> np.ndarray:
     return import_clip(clips[REAL_WALK], floor="frame0").joints.astype(np.float64)
 
 
-def shrunk_upper_arms(joints: np.ndarray, start: int = 20, frames: int = 4, depth: float = 0.08) -> np.ndarray:
+def shrunk_upper_arms(joints: np.ndarray, start: int = 20, frames: int = 4,
+                      depth: float = 0.08) -> np.ndarray:  # fmt: skip
     """joints (T, 22, 3) with both elbows slid up their upper arms by a sine bump of ``depth`` metres over
     ``frames`` frames from ``start``, the wrists where they were: arm bones that change length, as in a
     generated motion (a reach's upper arm measured 26.6 -> 19.1 cm -> 26.6 cm over six frames)."""
