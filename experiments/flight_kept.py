@@ -64,13 +64,13 @@ def _variant(name: str):
         searched = base.with_controller("search")
         cost = replace(searched.search.cost, body_velocity=0.1)
         return replace(searched, search=replace(searched.search, cost=cost))
-    if name == "fitted_arms":  # each arm fitted to the body's bones with its wrist kept before it is copied
-        return replace(base, reach_arms=True)
+    if name == "copied_arms":  # the arms' bone directions copied as they are, not fitted to the body first
+        return replace(base, reach_arms=False)
     raise ValueError(f"unknown variant {name!r}")
 
 
 VARIANTS = ("sampling", "ballistic", "no_land", "ballistic_no_land", "lift_0.3", "feet_balance",
-            "feet_through_actuators", "fallback", "no_recover", "search", "search_velocity", "fitted_arms")
+            "feet_through_actuators", "fallback", "no_recover", "search", "search_velocity", "copied_arms")
 
 
 def _cpu_wall() -> np.ndarray:

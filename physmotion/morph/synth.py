@@ -195,15 +195,23 @@ def _setting_sections(
     return {"preprocess": asdict(preprocess), "projection": proj, "sampler": asdict(sampler)}
 
 
+# Fields whose default changed after they were added: the value a folder written before the field existed
+# was made with (the arm fit came in off, then became the default).
+_BEFORE_FIELD = {"projection": {"reach_arms": False}}
+
+
 def _setting_defaults() -> dict:
-    """The configuration sections of synth.json at their defaults, as a re-read synth.json has them."""
-    return json.loads(json.dumps(_setting_sections(PreprocessConfig(), ProjectionConfig(), ddim_50())))
+    """The configuration sections of synth.json as a re-read synth.json has them, at the values that a
+    folder written before a field existed was made with: the field's default, or :data:`_BEFORE_FIELD`'s."""
+    defaults = json.loads(json.dumps(_setting_sections(PreprocessConfig(), ProjectionConfig(), ddim_50())))
+    return {k: v | _BEFORE_FIELD.get(k, {}) for k, v in defaults.items()}
 
 
 def _with_defaults(stored: object, defaults: dict) -> object:
-    """``stored`` settings (a synth.json's) with the fields it lacks taken at their defaults: a field is
+    """``stored`` settings (a synth.json's) with the fields it lacks taken from ``defaults``: a field is
     added to a configuration with a default that keeps what the code did before, so a folder written
-    before the field existed was made with that default."""
+    before the field existed was made with that default (or :data:`_BEFORE_FIELD`'s value, where the
+    default changed later)."""
     if not isinstance(stored, dict):
         return stored
     filled = {k: _with_defaults(stored[k], v) if k in stored else v for k, v in defaults.items()}

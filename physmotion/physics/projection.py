@@ -116,10 +116,9 @@ class ProjectionConfig:
     first_frame_margin: float = 0.02  # m
     # Fit each arm to the body's bone lengths with its wrist kept (``retarget.reach_arm_ends``) before the
     # bone directions are copied: a generated arm whose bones change length otherwise swings its wrist
-    # faster than the motion does. Off until PhysDiff's bench is re-made with it: on 116 test motions one P
-    # jumps less and reads better, on the 32 bench prompts PhysDiff read worse (docs/decisions/projection.md:
-    # "arms fitted to the body's bones").
-    reach_arms: bool = False
+    # faster than the motion does. Captured clips' rigid bones pass through unchanged (docs/decisions/
+    # projection.md: "arms fitted to the body's bones", and "... the default").
+    reach_arms: bool = True
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.crossfade <= 2.0:

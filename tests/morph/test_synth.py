@@ -153,11 +153,18 @@ def test_a_folder_older_than_a_setting_resumes(model, built_dir: Path, full: Pat
     (out / "synth.json").write_text(json.dumps(info))
     with pytest.raises(PhysmotionError, match=r"projection\.shaping\.hover_support: 0\.05 there, 0\.0 now"):
         run(model, built_dir, out)
+    # the arm fit came in off and became the default later: a folder from before it was made without it
+    info["projection"]["shaping"]["hover_support"] = 0.0
+    del info["projection"]["reach_arms"]
+    (out / "synth.json").write_text(json.dumps(info))
+    with pytest.raises(PhysmotionError, match=r"projection\.reach_arms: False there, True now"):
+        run(model, built_dir, out)
     # a folder from before planned lengths counted feature rows holds items one row short: not continued
     del info["projection"]["shaping"]["hover_support"], info["lengths"]
     (out / "synth.json").write_text(json.dumps(info))
     with pytest.raises(PhysmotionError, match=r"lengths: None there, features now"):
         run(model, built_dir, out)
+
 
 def test_a_caption_subset_is_seeded_and_part_of_the_folder(model, built_dir: Path, tmp_path: Path) -> None:
     every = train_captions(built_dir)

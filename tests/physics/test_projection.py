@@ -26,10 +26,11 @@ def walk(real_walk: np.ndarray) -> np.ndarray:
 
 
 def test_p_keeps_the_wrists_of_arms_whose_bones_change_length(real_walk: np.ndarray) -> None:
-    """With ``reach_arms`` P's reference fits the arms to the body's bones: with the elbows slid 8 cm up the
-    upper arms for four frames, its wrists stay on the motion's; copying the bones' directions (the default)
-    puts them 3-4 cm off and swings them faster than the motion (issue 62's frame jumps)."""
+    """With ``reach_arms`` (the default) P's reference fits the arms to the body's bones: with the elbows slid
+    8 cm up the upper arms for four frames, its wrists stay on the motion's; copying the bones' directions as
+    they are puts them 3-4 cm off and swings them faster than the motion (issue 62's frame jumps)."""
     moved = shrunk_upper_arms(real_walk[:60])
+    assert ProjectionConfig().reach_arms and ProjectionConfig.sampling().reach_arms
     errors = {}
     for on in (True, False):
         prep = prepare_motion(moved, 20.0, replace(ProjectionConfig.sampling(), reach_arms=on))
