@@ -116,8 +116,8 @@ class ProjectionConfig:
     first_frame_margin: float = 0.02  # m
     # Fit each arm to the body's bone lengths with its wrist kept (``retarget.reach_arm_ends``) before the
     # bone directions are copied: a generated arm whose bones change length otherwise swings its wrist
-    # faster than the motion does. Captured clips' rigid bones pass through unchanged (docs/decisions/
-    # projection.md: "arms fitted to the body's bones", and "... the default").
+    # faster than the motion does. Captured clips' rigid bones pass through unchanged
+    # (docs/decisions/projection.md: "arms fitted to the body's bones, the default").
     reach_arms: bool = True
 
     def __post_init__(self) -> None:
