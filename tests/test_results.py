@@ -542,7 +542,7 @@ QUOTES = {  # which doc quotes which result file
     ("limitations", "learn at scale"): learn_at_scale_quotes,
     ("results", "ppo at scale"): ppo_at_scale_quotes,
     ("limitations", "ppo at scale"): ppo_at_scale_quotes,
-    ("limitations", "step jumps recover"): lambda: step_jumps_quotes("step_jumps_recover.json", DEFAULT_PHYSDIFF),
+    ("limitations", "step jumps arms"): lambda: step_jumps_quotes("step_jumps_arms.json", DEFAULT_PHYSDIFF),
     ("results", "step jumps"): step_jumps_quotes,
     ("limitations", "flight fly"): flight_fly_quotes,
     ("limitations", "flight search"): flight_search_quotes,
@@ -562,7 +562,7 @@ def _section(text: str, source: str) -> str:
              "biomodiffuse": "results/biomodiffuse", "refine": "results/refine", "imitator": "results/imitator_",
              "imitator captured": "results/imitator_captured", "learn": "learn_from_search", "learn at scale": "learn_at_scale",
              "ppo at scale": "ppo_at_scale",
-             "morph search": "morph_search.*", "step jumps": "results/step_jumps", "step jumps recover": "results/step_jumps_recover",
+             "morph search": "morph_search.*", "step jumps": "results/step_jumps", "step jumps arms": "results/step_jumps_arms",
              "flight fly": "flight_kept_fly", "flight search": "flight_kept_search", "import floor": "import_floor"}
     marker = files[source]
     return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
