@@ -562,7 +562,8 @@ def _section(text: str, source: str) -> str:
              "biomodiffuse": "results/biomodiffuse", "refine": "results/refine", "imitator": "results/imitator_",
              "imitator captured": "results/imitator_captured", "learn": "learn_from_search", "learn at scale": "learn_at_scale",
              "ppo at scale": "ppo_at_scale",
-             "morph search": "morph_search.*", "step jumps": "results/step_jumps", "step jumps arms": "results/step_jumps_arms",
+             "morph search": "morph_search.*", "step jumps": "results/step_jumps",
+             "step jumps arms": "results/step_jumps_arms",
              "flight fly": "flight_kept_fly", "flight search": "flight_kept_search", "import floor": "import_floor"}
     marker = files[source]
     return "\n\n".join(p for p in re.split(r"\n\s*\n", text) if marker in p)
