@@ -13,7 +13,12 @@ of its captions (as ``evaluate`` draws them), plain (``none``) and in each mode,
 - past P's input: over what the last P was given + 2 cm (``ProjectionLog.last_input_steps``): P's jumps;
 - input past the sample: what the last P was given, over the plain sample + 2 cm: the denoiser's share;
 - outputs with a reset, and of those past the sample, the share with a reset;
-- where the largest step past the sample is: a foot, a hand or wrist, or elsewhere.
+- where the largest step past the sample is: a foot, a hand or wrist, or elsewhere;
+- which stage first moves past the sample + 2 cm, for each output that does: the denoiser (what the last P
+  was given), P's reference (that input retargeted onto the humanoid and shaped,
+  ``ProjectedMotion.reference_step``), or the simulation, split by where the output's largest step is: a
+  foot moving along the floor (within ``_ALONG_FLOOR`` of its own lowest height in both frames: a standing
+  foot that lagged a gliding sample catching up) or elsewhere (a swing, a landing, an arm).
 
 Writes ``<out>.md`` and ``<out>.json`` (docs/decisions/sampling.md: "jumps past the sample's: P's or the
 denoiser's").
@@ -31,6 +36,8 @@ from physmotion.metrics.dynamics import STEP_MARGIN, largest_step
 from physmotion.skeleton import FOOT_JOINTS
 
 _HANDS = (18, 19, 20, 21)  # elbows and wrists: the 22-joint body's arm ends
+_ALONG_FLOOR = 0.03  # m over the joint's own lowest height in the output: a foot on (or at) the floor
+_STAGES = ("denoiser", "reference", "sim: foot along the floor", "sim: elsewhere")
 
 
 def _where(joints: np.ndarray) -> str:
@@ -38,6 +45,20 @@ def _where(joints: np.ndarray) -> str:
     step = np.linalg.norm(np.diff(joints, axis=0), axis=-1)  # (T-1, 22)
     j = int(np.unravel_index(np.argmax(step), step.shape)[1])
     return "foot" if j in FOOT_JOINTS else "arm" if j in _HANDS else "other"
+
+
+def _stage(out: np.ndarray, plain: float, given: float, reference: float) -> str:
+    """Which of :data:`_STAGES` first moves past the plain sample's largest step ``plain`` + the margin, for
+    an output out (T, 22, 3) that does: what the last P was ``given``, the ``reference`` it tracked, or
+    its simulation (then where the output's largest step is)."""
+    if given > plain + STEP_MARGIN:
+        return _STAGES[0]
+    if reference > plain + STEP_MARGIN:
+        return _STAGES[1]
+    step = np.linalg.norm(np.diff(out, axis=0), axis=-1)  # (T-1, 22)
+    f, j = np.unravel_index(np.argmax(step), step.shape)
+    low = out[:, j, 1].min() + _ALONG_FLOOR
+    return _STAGES[2] if j in FOOT_JOINTS and max(out[f, j, 1], out[f + 1, j, 1]) <= low else _STAGES[3]
 
 
 def measure(data: Path, split: str, seeds: list[int], modes: list[str], batch: int = 16,
@@ -55,8 +76,8 @@ def measure(data: Path, split: str, seeds: list[int], modes: list[str], batch: i
 
     items = load_items(data, split, max_frames=196)[:max_motions]
     model = MotionDiffusion.load(model_dir)
-    rows: dict[str, dict[str, list]] = {m: {"out": [], "plain": [], "given": [], "reset": [], "where": []}
-                                        for m in modes}  # fmt: skip
+    rows: dict[str, dict[str, list]] = {m: {"out": [], "plain": [], "given": [], "reset": [], "where": [],
+                                            "stage": []} for m in modes}  # fmt: skip
     for seed in seeds:
         captions = draw_captions(items, seed)
         for i in range(0, len(items), batch):
@@ -66,10 +87,14 @@ def measure(data: Path, split: str, seeds: list[int], modes: list[str], batch: i
                                                               lengths=lengths).motions]  # fmt: skip
             for mode in modes:
                 res = generate(chunk, replace(cfg, physics=mode), model, lengths=lengths)
-                r = rows[mode]
-                r["out"] += [largest_step(m.joints) for m in res.motions]
+                r, n = rows[mode], len(res.motions)
+                out_steps, given = [largest_step(m.joints) for m in res.motions], res.projections.last_input_steps(n)
+                r["stage"] += [_stage(m.joints.astype(np.float64), p, g, ref) if o > p + STEP_MARGIN else None
+                               for m, o, p, g, ref in zip(res.motions, out_steps, plain, given,
+                                                          res.projections.last_reference_steps(n))]  # fmt: skip
+                r["out"] += out_steps
                 r["plain"] += plain
-                r["given"] += res.projections.last_input_steps(len(res.motions))
+                r["given"] += given
                 r["reset"] += [(m.resets or 0) > 0 for m in res.motions]
                 r["where"] += [_where(m.joints.astype(np.float64)) for m in res.motions]
     out = {}
@@ -82,6 +107,7 @@ def measure(data: Path, split: str, seeds: list[int], modes: list[str], batch: i
             "input_past_sample": float((g > p + STEP_MARGIN).mean()), "with_reset": float(reset.mean()),
             "past_sample_with_reset": float(reset[past].mean()) if past.any() else None,
             "past_sample_where": {k: int((where[past] == k).sum()) for k in ("foot", "arm", "other")},
+            "past_sample_stage": {k: sum(s == k for s in r["stage"]) for k in _STAGES},
             "excess_cm_median": float(np.median(100 * (o - p)[past])) if past.any() else None,
         }  # fmt: skip
     return out
@@ -105,10 +131,12 @@ def main(argv: list[str] | None = None) -> int:
         table = markdown_table(
             ("mode", "outputs", "past the sample (issue 62)", "past P's input (P's jumps)",
              "P's input past the sample (denoising)", "outputs with a reset", "of those past the sample: reset",
-             "past the sample at: foot / arm / other", "excess over the sample, median cm"),
+             "past the sample at: foot / arm / other", "first past the sample: " + " / ".join(_STAGES),
+             "excess over the sample, median cm"),
             [(m, r["motions"], pct(r["past_sample"]), pct(r["past_input"]), pct(r["input_past_sample"]),
               pct(r["with_reset"]), pct(r["past_sample_with_reset"]),
               " / ".join(str(v) for v in r["past_sample_where"].values()),
+              " / ".join(str(v) for v in r["past_sample_stage"].values()),
               "-" if r["excess_cm_median"] is None else f"{r['excess_cm_median']:.1f}") for m, r in rows.items()])
         meta = run_meta(__file__, argv, args.tree, "sampling", data=str(args.data), split=args.split, seeds=seeds,
                         modes=modes, margin_m=STEP_MARGIN)  # fmt: skip

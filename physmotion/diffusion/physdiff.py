@@ -102,6 +102,9 @@ class Projected:
     # the input's largest frame-to-frame joint move, m (metrics.dynamics.largest_step): what an output's
     # own largest move is measured against to tell P's jumps from the denoiser's (issue 62)
     input_steps: list[float] = field(default_factory=list)
+    # the largest move of the reference P tracked (ProjectedMotion.reference_step): a jump it already makes
+    # is P's retargeting or shaping, not its simulation
+    reference_steps: list[float] = field(default_factory=list)
     # each motion's place in the run's batch where a call projects only some (``fly:last``); None: all
     indices: list[int] | None = None
 
@@ -122,6 +125,7 @@ class ProjectionLog:
     residual: list[float] = field(default_factory=list)
     resets: list[int] = field(default_factory=list)  # times the humanoid was put back (a jump in the output)
     input_steps: list[float] = field(default_factory=list)  # largest frame step of each input, m
+    reference_steps: list[float] = field(default_factory=list)  # ... and of the reference P tracked for it
     motions: list[int] = field(default_factory=list)  # each projection's motion: its place in the run's batch
 
     def add(self, done: Projected) -> Projected:
@@ -134,12 +138,17 @@ class ProjectionLog:
         self.residual += done.residual_force
         self.resets += done.resets
         self.input_steps += done.input_steps
+        self.reference_steps += done.reference_steps
         return done
 
     def last_input_steps(self, n: int) -> list[float]:
         """Per motion of a run whose last call projected its ``n`` motions in order, the largest frame step
         of what that call was given (its output is the run's); empty without a call."""
         return self.input_steps[-n:] if self.calls else []
+
+    def last_reference_steps(self, n: int) -> list[float]:
+        """As :meth:`last_input_steps`, the largest frame step of the reference that call tracked."""
+        return self.reference_steps[-n:] if self.calls else []
 
     def resets_per_motion(self, n: int) -> list[int]:
         """Per motion of a run of ``n`` motions (PhysDiff, post, Morph), its resets over all calls; zeros
@@ -172,7 +181,8 @@ class FeatureProjector:
         n = len(joints)
         done = Projected(joints=[np.empty(0)] * n, bodies=[np.empty(0)] * n, records=[None] * n,
                          selected=[False] * n, tracked=[False] * n, mpjpe_mm=[0.0] * n,
-                         residual_force=[0.0] * n, input_steps=[largest_step(j) for j in joints])  # fmt: skip
+                         residual_force=[0.0] * n, input_steps=[largest_step(j) for j in joints],
+                         reference_steps=[0.0] * n)  # fmt: skip
         by_len: dict[int, list[int]] = {}
         for i, j in enumerate(joints):
             by_len.setdefault(len(j), []).append(i)
@@ -183,6 +193,7 @@ class FeatureProjector:
                 done.selected[i], done.tracked[i] = bool(res.selected[k]), bool(res.success[k])
                 done.mpjpe_mm[i] = float(1000 * res.mpjpe[k].mean())
                 done.residual_force[i] = float(res.residual_force[k].mean())
+                done.reference_steps[i] = float(res.reference_step[k])
         return done
 
     def joints(self, x0: torch.Tensor, lengths: list[int]) -> list[np.ndarray]:

@@ -255,6 +255,9 @@ class ProjectedMotion:
     ``fallback``): no outside hand on it.
     recovered: (B,) int, stretches the search carried in place of a reset (``ProjectionConfig.recover``);
     recovered_frames: (B, T) bool, frames all of whose control steps the search simulated: no outside hand.
+    reference_step: (B,) metres, the largest frame-to-frame joint move of the reference P tracked (the input
+    retargeted onto the humanoid and shaped, at the input rate): a jump in the output that the reference
+    already makes is P's retargeting or shaping, not its simulation.
     teacher_obs, teacher_offsets: with the search controller only, per control step of the simulation
     (B, N, 599) float32 the observation a policy would see (:func:`physmotion.physics.policy.observe`, cap
     0) and (B, N, 63) the joint-target offsets the search committed (rad): a policy's teacher labels.
@@ -280,6 +283,7 @@ class ProjectedMotion:
     searched: np.ndarray
     recovered: np.ndarray
     recovered_frames: np.ndarray
+    reference_step: np.ndarray
     teacher_obs: np.ndarray | None = None
     teacher_offsets: np.ndarray | None = None
 
@@ -466,8 +470,9 @@ def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig,
     ctrl_fps = 1.0 / config.humanoid.control_dt
     prep = prepare_motion(x, fps, config)
     body, model, lift, target, grounded = prep.body, prep.model, prep.lift, prep.target, prep.grounded
+    tracked_step = {"reference_step": _reference_step(prep, len(x), fps, ctrl_fps)}
     if config.controller == "search":
-        return _search_one(prep, x, fps, config, on_step) | {"searched": np.array(True)}
+        return _search_one(prep, x, fps, config, on_step) | {"searched": np.array(True)} | tracked_step
     tracker = _controller(model, config)  # holds no episode state: one serves every pass
     reference, best = target, None
     for ilc_pass in range(config.ilc_passes + 1):
@@ -483,10 +488,18 @@ def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig,
         if ilc_pass < config.ilc_passes:  # the next pass's reference: the root error fed forward
             reference = reference.copy()
             reference[:, :3] += config.ilc_gain * (target[:, :3] - roll.qpos[:, :3])
-    tracked = best[1] | {"body": body, "grounded": np.array(grounded), "searched": np.array(False)}
+    tracked = best[1] | {"body": body, "grounded": np.array(grounded), "searched": np.array(False)} | tracked_step
     if config.fallback and _falls_short(tracked, x, config.fallback_flight):
-        return _fallback(tracked, x, fps, config, on_step)
+        return _fallback(tracked, x, fps, config, on_step) | tracked_step
     return tracked
+
+
+def _reference_step(prep: PreparedMotion, t: int, fps: float, ctrl_fps: float) -> np.ndarray:
+    """() float64: the largest frame step of prep's shaped reference brought to the input's t frames at
+    ``fps`` (``ProjectedMotion.reference_step``)."""
+    from physmotion.metrics.dynamics import largest_step  # metrics import the physics package
+
+    return np.array(largest_step(qpos_to_joints(resample_qpos(prep.target, ctrl_fps, fps, count=t), prep.model)))
 
 
 def mend_first_frame(x: np.ndarray, margin: float) -> np.ndarray:

@@ -44,6 +44,9 @@ def test_projector_simulates_a_real_walk(built_dir: Path, tiny_model) -> None:
     assert log.last_input_steps(1) == done.input_steps
     assert done.input_steps[0] == pytest.approx(largest_step(walk), abs=1e-9) and done.input_steps[0] > 0.01
     assert ProjectionLog().last_input_steps(1) == []
+    # the reference P tracked: the walk retargeted onto the humanoid and shaped, moving about as fast
+    assert log.last_reference_steps(1) == done.reference_steps
+    assert done.reference_steps[0] == pytest.approx(done.input_steps[0], abs=0.01)
     sim = recover_from_ric(tiny_model.normalizer.denormalize(out[0, :80].numpy()).astype(np.float64))
     ref = recover_from_ric(feats.astype(np.float64))
     err = np.linalg.norm((sim - sim[:, :1]) - (ref - ref[:, :1]), axis=-1).mean()

@@ -11,6 +11,7 @@ import pytest
 from physmotion.errors import ShapeError
 from physmotion.features.humanml3d import extract_features
 from physmotion.metrics import physical_metrics
+from physmotion.metrics.dynamics import largest_step
 from physmotion.physics.humanoid import body_from_joints
 from physmotion.physics.projection import ProjectionConfig, prepare_motion, project, resample_qpos
 from physmotion.physics.retarget import qpos_to_joints
@@ -45,6 +46,8 @@ def test_tracks_a_real_walk(walk: np.ndarray) -> None:
     assert out.joints.shape == out.simulated.shape == walk.shape and out.mpjpe.shape == (80,)
     # metres: 48 mm on average over all 203 walk/run clips (experiments/projection_quality.py)
     assert out.mpjpe.mean() < 0.04
+    # the reference P tracked is the walk retargeted and shaped: it moves no joint faster than the walk does
+    assert abs(float(out.reference_step) - largest_step(walk)) < 0.005
     # A MuJoCo contact at the sampled instant in 71 % of the frames: with stiff contacts the loaded foot
     # bounces off by a few mm between impacts.
     assert out.contacts.any(axis=1).mean() >= 0.6
