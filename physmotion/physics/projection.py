@@ -488,7 +488,8 @@ def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig,
         if ilc_pass < config.ilc_passes:  # the next pass's reference: the root error fed forward
             reference = reference.copy()
             reference[:, :3] += config.ilc_gain * (target[:, :3] - roll.qpos[:, :3])
-    tracked = best[1] | {"body": body, "grounded": np.array(grounded), "searched": np.array(False)} | tracked_step
+    tracked = best[1] | {"body": body, "grounded": np.array(grounded), "searched": np.array(False)}
+    tracked |= tracked_step
     if config.fallback and _falls_short(tracked, x, config.fallback_flight):
         return _fallback(tracked, x, fps, config, on_step) | tracked_step
     return tracked
@@ -499,7 +500,8 @@ def _reference_step(prep: PreparedMotion, t: int, fps: float, ctrl_fps: float) -
     ``fps`` (``ProjectedMotion.reference_step``)."""
     from physmotion.metrics.dynamics import largest_step  # metrics import the physics package
 
-    return np.array(largest_step(qpos_to_joints(resample_qpos(prep.target, ctrl_fps, fps, count=t), prep.model)))
+    reference = qpos_to_joints(resample_qpos(prep.target, ctrl_fps, fps, count=t), prep.model)
+    return np.array(largest_step(reference))
 
 
 def mend_first_frame(x: np.ndarray, margin: float) -> np.ndarray:

@@ -28,7 +28,8 @@ def test_a_jump_is_put_on_the_first_stage_that_makes_it(mocap_dir: Path) -> None
     plain = 0.2
     assert _stage(walk, plain, given=0.25, reference=0.3) == _STAGES[0]
     assert _stage(walk, plain, given=0.21, reference=0.25) == _STAGES[1]
-    steps = np.linalg.norm(np.diff(walk, axis=0), axis=-1)  # a standing left toe: the frame where it is lowest
+    # a standing left toe: the frame where it is lowest and slowest
+    steps = np.linalg.norm(np.diff(walk, axis=0), axis=-1)
     f = int(np.argmin(walk[:-1, 10, 1] + steps[:, 10]))
     dragged = walk.copy()
     dragged[f + 1 :, 10, 0] += 0.4  # the left toe slid 40 cm along the floor in one frame
