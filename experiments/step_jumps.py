@@ -91,7 +91,8 @@ def measure(data: Path, split: str, seeds: list[int], modes: list[str], batch: i
                 out_steps = [largest_step(m.joints) for m in res.motions]
                 given, refs = res.projections.last_input_steps(n), res.projections.last_reference_steps(n)
                 for m, o, p, g, ref in zip(res.motions, out_steps, plain, given, refs):
-                    r["stage"].append(_stage(m.joints.astype(np.float64), p, g, ref) if o > p + STEP_MARGIN else None)
+                    past = o > p + STEP_MARGIN
+                    r["stage"].append(_stage(m.joints.astype(np.float64), p, g, ref) if past else None)
                 r["out"] += out_steps
                 r["plain"] += plain
                 r["given"] += given
