@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from experiments.step_jumps import _STAGES, _stage, _where, measure
+from experiments.step_jumps import _STAGES, CONTROL, _stage, _where, measure
 from physmotion.io import import_clip, load_manifest
 
 
@@ -47,11 +47,12 @@ def test_post_has_no_denoising_after_its_p(small_built_dir: Path, tiny_model_dir
     """post:1's P is given the plain sample itself, so its jumps past P's input are its jumps past the
     sample and nothing is the denoiser's; PhysDiff's last P is given a denoised motion."""
     rows = measure(small_built_dir, "test", [0], ["post:1", "physdiff:end:1,space:1"], batch=4,
-                   model_dir=tiny_model_dir, max_motions=4, recover=False)  # fmt: skip
-    post, physdiff = rows["post:1"], rows["physdiff:end:1,space:1"]
+                   model_dir=tiny_model_dir, max_motions=4, recover=False, control=True)  # fmt: skip
+    post, physdiff, control = rows.pop("post:1"), rows.pop("physdiff:end:1,space:1"), rows.pop(CONTROL)
+    assert not rows and control["motions"] == 4 and 0 <= control["past_sample"] <= 1
     assert post["motions"] == physdiff["motions"] == 4
     assert post["input_past_sample"] == 0.0 and post["past_input"] == post["past_sample"]
-    for r in rows.values():
+    for r in (post, physdiff):
         assert 0 <= r["past_input"] <= 1 and 0 <= r["with_reset"] <= 1
         assert sum(r["past_sample_where"].values()) == round(r["past_sample"] * r["motions"])
         assert sum(r["past_sample_stage"].values()) == round(r["past_sample"] * r["motions"])
