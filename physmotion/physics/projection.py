@@ -470,9 +470,9 @@ def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig,
     ctrl_fps = 1.0 / config.humanoid.control_dt
     prep = prepare_motion(x, fps, config)
     body, model, lift, target, grounded = prep.body, prep.model, prep.lift, prep.target, prep.grounded
-    tracked_step = {"reference_step": _reference_step(prep, len(x), fps, ctrl_fps)}
+    ref_field = {"reference_step": _reference_step(prep, len(x), fps, ctrl_fps)}
     if config.controller == "search":
-        return _search_one(prep, x, fps, config, on_step) | {"searched": np.array(True)} | tracked_step
+        return _search_one(prep, x, fps, config, on_step) | {"searched": np.array(True)} | ref_field
     tracker = _controller(model, config)  # holds no episode state: one serves every pass
     reference, best = target, None
     for ilc_pass in range(config.ilc_passes + 1):
@@ -489,9 +489,9 @@ def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig,
             reference = reference.copy()
             reference[:, :3] += config.ilc_gain * (target[:, :3] - roll.qpos[:, :3])
     tracked = best[1] | {"body": body, "grounded": np.array(grounded), "searched": np.array(False)}
-    tracked |= tracked_step
+    tracked |= ref_field
     if config.fallback and _falls_short(tracked, x, config.fallback_flight):
-        return _fallback(tracked, x, fps, config, on_step) | tracked_step
+        return _fallback(tracked, x, fps, config, on_step) | ref_field
     return tracked
 
 
