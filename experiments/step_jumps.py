@@ -90,6 +90,7 @@ def measure(data: Path, split: str, seeds: list[int], modes: list[str], batch: i
         for i in range(0, len(items), batch):
             chunk, lengths = captions[i : i + batch], [len(it.features) for it in items[i : i + batch]]
             cfg = GenerateConfig(seed=seed * 100_000 + i).with_search_recovery(recover)
+            cfg = replace(cfg, projection=replace(cfg.projection, record_reference_step=True))
             plain = [largest_step(m.joints) for m in generate(chunk, replace(cfg, physics="none"), model,
                                                               lengths=lengths).motions]  # fmt: skip
             if control:

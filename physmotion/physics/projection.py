@@ -119,6 +119,10 @@ class ProjectionConfig:
     # faster than the motion does. Captured clips' rigid bones pass through unchanged
     # (docs/decisions/projection.md: "arms fitted to the body's bones, the default").
     reach_arms: bool = True
+    # Record the largest frame step of the reference P tracked (``ProjectedMotion.reference_step``, NaN when
+    # off), which tells P's retargeting and shaping from its simulation (experiments/step_jumps). One more
+    # forward kinematics of the whole motion, about 2 % of a P, so off unless asked for.
+    record_reference_step: bool = False
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.crossfade <= 2.0:
@@ -257,7 +261,8 @@ class ProjectedMotion:
     recovered_frames: (B, T) bool, frames all of whose control steps the search simulated: no outside hand.
     reference_step: (B,) metres, the largest frame-to-frame joint move of the reference P tracked (the input
     retargeted onto the humanoid and shaped, at the input rate): a jump in the output that the reference
-    already makes is P's retargeting or shaping, not its simulation.
+    already makes is P's retargeting or shaping, not its simulation. NaN unless
+    ``ProjectionConfig.record_reference_step``.
     teacher_obs, teacher_offsets: with the search controller only, per control step of the simulation
     (B, N, 599) float32 the observation a policy would see (:func:`physmotion.physics.policy.observe`, cap
     0) and (B, N, 63) the joint-target offsets the search committed (rad): a policy's teacher labels.
@@ -470,7 +475,8 @@ def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig,
     ctrl_fps = 1.0 / config.humanoid.control_dt
     prep = prepare_motion(x, fps, config)
     body, model, lift, target, grounded = prep.body, prep.model, prep.lift, prep.target, prep.grounded
-    ref_field = {"reference_step": _reference_step(prep, len(x), fps, ctrl_fps)}
+    step = _reference_step(prep, len(x), fps, ctrl_fps) if config.record_reference_step else np.array(np.nan)
+    ref_field = {"reference_step": step}
     if config.controller == "search":
         return _search_one(prep, x, fps, config, on_step) | {"searched": np.array(True)} | ref_field
     tracker = _controller(model, config)  # holds no episode state: one serves every pass

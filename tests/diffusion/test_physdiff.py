@@ -11,6 +11,7 @@ import torch
 from physmotion.diffusion.physdiff import FeatureProjector, ProjectionLog, joints_to_features
 from physmotion.features.humanml3d import recover_from_ric
 from physmotion.metrics.dynamics import largest_step
+from physmotion.physics.projection import ProjectionConfig
 
 
 def _walk(built_dir: Path) -> np.ndarray:
@@ -33,7 +34,8 @@ def test_projector_simulates_a_real_walk(built_dir: Path, tiny_model) -> None:
     feats = _walk(built_dir)
     x0 = torch.from_numpy(tiny_model.normalizer.normalize(feats)).float()[None]
     x0 = torch.cat([x0, torch.zeros(1, 8, x0.shape[-1])], dim=1)  # padded as in a mixed-length batch
-    out, done = FeatureProjector(tiny_model).project_features(x0, [80])
+    config = ProjectionConfig.sampling(record_reference_step=True)
+    out, done = FeatureProjector(tiny_model, config).project_features(x0, [80])
     assert out.shape == x0.shape and torch.equal(out[:, 80:], x0[:, 80:])
     assert done.selected == [True] and done.mpjpe_mm[0] < 100
     assert done.joints[0].shape == (80, 22, 3) and done.bodies[0].shape == (22, 3)

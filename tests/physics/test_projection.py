@@ -46,7 +46,13 @@ def test_tracks_a_real_walk(walk: np.ndarray) -> None:
     assert out.joints.shape == out.simulated.shape == walk.shape and out.mpjpe.shape == (80,)
     # metres: 48 mm on average over all 203 walk/run clips (experiments/projection_quality.py)
     assert out.mpjpe.mean() < 0.04
-    # the reference P tracked is the walk retargeted and shaped: it moves no joint faster than the walk does
+    assert np.isnan(out.reference_step)  # recorded only when asked for (one more forward kinematics)
+
+
+def test_the_reference_step_is_the_walks_retargeted(walk: np.ndarray) -> None:
+    """The reference P tracked is the walk retargeted onto the humanoid and shaped: it moves no joint much
+    faster than the walk does."""
+    out = project(walk, config=ProjectionConfig(record_reference_step=True))
     assert abs(float(out.reference_step) - largest_step(walk)) < 0.005
     # A MuJoCo contact at the sampled instant in 71 % of the frames: with stiff contacts the loaded foot
     # bounces off by a few mm between impacts.
