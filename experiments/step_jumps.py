@@ -45,10 +45,16 @@ CONTROL = "none, another seed (control)"
 _OTHER_SEED = 50_000  # added to a batch's seed for the control (a batch's: seed x 100,000 + its first motion)
 
 
+def _largest_step_at(joints: np.ndarray) -> tuple[int, int]:
+    """(frame f, joint j) of the largest frame step of joints (T, 22, 3): joint j's move from f to f + 1."""
+    step = np.linalg.norm(np.diff(joints, axis=0), axis=-1)  # (T-1, 22)
+    f, j = np.unravel_index(np.argmax(step), step.shape)
+    return int(f), int(j)
+
+
 def _where(joints: np.ndarray) -> str:
     """Which joint group makes the largest frame step of joints (T, 22, 3)."""
-    step = np.linalg.norm(np.diff(joints, axis=0), axis=-1)  # (T-1, 22)
-    j = int(np.unravel_index(np.argmax(step), step.shape)[1])
+    j = _largest_step_at(joints)[1]
     return "foot" if j in FOOT_JOINTS else "arm" if j in _HANDS else "other"
 
 
@@ -60,8 +66,7 @@ def _stage(out: np.ndarray, plain: float, given: float, reference: float) -> str
         return _STAGES[0]
     if reference > plain + STEP_MARGIN:
         return _STAGES[1]
-    step = np.linalg.norm(np.diff(out, axis=0), axis=-1)  # (T-1, 22)
-    f, j = np.unravel_index(np.argmax(step), step.shape)
+    f, j = _largest_step_at(out)
     low = out[:, j, 1].min() + _ALONG_FLOOR
     return _STAGES[2] if j in FOOT_JOINTS and max(out[f, j, 1], out[f + 1, j, 1]) <= low else _STAGES[3]
 
