@@ -64,13 +64,16 @@ def _variant(name: str):
         searched = base.with_controller("search")
         cost = replace(searched.search.cost, body_velocity=0.1)
         return replace(searched, search=replace(searched.search, cost=cost))
+    if name == "no_push_off":  # the rise into a flight played as the motion has it, however slow
+        return replace(base, shaping=replace(base.shaping, push_off=False))
     if name == "copied_arms":  # the arms' bone directions copied as they are, not fitted to the body first
         return replace(base, reach_arms=False)
     raise ValueError(f"unknown variant {name!r}")
 
 
 VARIANTS = ("sampling", "ballistic", "no_land", "ballistic_no_land", "lift_0.3", "feet_balance",
-            "feet_through_actuators", "fallback", "no_recover", "search", "search_velocity", "copied_arms")
+            "feet_through_actuators", "fallback", "no_recover", "search", "search_velocity", "copied_arms",
+            "no_push_off")
 
 
 def _cpu_wall() -> np.ndarray:

@@ -22,14 +22,13 @@ from dataclasses import dataclass, field, replace
 from functools import lru_cache, partial
 
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
 
 from physmotion.conventions import FPS
 from physmotion.errors import ShapeError
 from physmotion.features.biomech import FEATURE_DIM_BIOMECH, to_263
 from physmotion.features.humanml3d import FEATURE_DIM, recover_from_ric
 from physmotion.physics.humanoid import HumanoidConfig, body_from_joints, build_model, foot_lift, layout
-from physmotion.physics.retarget import joints_to_qpos, qpos_to_joints, reach_arm_ends
+from physmotion.physics.retarget import joints_to_qpos, qpos_at, qpos_to_joints, reach_arm_ends
 from physmotion.physics.search import SearchConfig, SearchController, search_humanoid
 from physmotion.physics.shaping import ShapingConfig, shape_reference
 from physmotion.physics.surface import body_lowest, pose_frames
@@ -198,6 +197,10 @@ class ProjectionConfig:
         "support judged against a hovering frame in the sampling preset"); the plain projection keeps the
         floor rule, which captured runs read better.
 
+        A generated jump often leaves the floor too slowly for the flight it then has; the rise into it is
+        played faster (``ShapingConfig.push_off``; docs/decisions/projection.md: "a push-off fast enough for
+        the flight"). The plain projection, run on captured motion, keeps it off.
+
         Where the tracker falls, the search first carries the body with no outside hand (``recover``), so
         that an output is simulated throughout rather than put back on the motion; it costs the search's
         seconds for those stretches alone (docs/decisions/projection.md: "the search in place of a reset")."""
@@ -206,7 +209,7 @@ class ProjectionConfig:
             "tau": 0.15,
             "tracking": TrackingConfig(feet_balance=False, residual_force=0.3),
             "humanoid": HumanoidConfig(residual_every=4),
-            "shaping": ShapingConfig(ballistic_flight=False, hover_support=0.05),
+            "shaping": ShapingConfig(ballistic_flight=False, hover_support=0.05, push_off=True),
             "mend_first_frame": True,
             "recover": True,
         }
@@ -379,15 +382,9 @@ def as_joints(motion: np.ndarray) -> tuple[np.ndarray, bool]:
 def resample_qpos(qpos: np.ndarray, fps_in: float, fps_out: float, count: int | None = None) -> np.ndarray:
     """qpos (T, 70) at fps_in -> (N, 70) at fps_out over the same span (or ``count`` frames, the
     last ones held): hinges and root position linearly, the root quaternion by slerp."""
-    t_in = np.arange(len(qpos)) / fps_in
-    n = count if count is not None else int(np.floor(t_in[-1] * fps_out + 1e-9)) + 1
-    t_out = np.minimum(np.arange(n) / fps_out, t_in[-1])
-    out = np.empty((n, qpos.shape[1]))
-    for i in [0, 1, 2, *range(7, qpos.shape[1])]:
-        out[:, i] = np.interp(t_out, t_in, qpos[:, i])
-    rots = Rotation.from_quat(qpos[:, 3:7], scalar_first=True)
-    out[:, 3:7] = Slerp(t_in, rots)(t_out).as_quat(scalar_first=True)
-    return out
+    last = (len(qpos) - 1) / fps_in
+    n = count if count is not None else int(np.floor(last * fps_out + 1e-9)) + 1
+    return qpos_at(qpos, np.minimum(np.arange(n) / fps_out, last), fps_in)
 
 
 def project(

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from physmotion.physics.humanoid import layout
+from physmotion.physics.retarget import qpos_at
 from physmotion.physics.surface import body_lowest, lowest_of, pose_frames
 from physmotion.physics.tracking import STANDARD_GRAVITY
 from physmotion.skeleton import JOINT_INDEX
@@ -75,6 +76,15 @@ class ShapingConfig:
     # ``ballistic_max`` (a hover, a step onto something: not a flight the tracker can make ballistic).
     ballistic_flight: bool = True
     ballistic_max: float = 0.05  # m
+    # push_off: before each such flight phase whose centre of mass rises more than its take-off speed
+    # carries it (sqrt(2 g rise) over ``push_off_margin`` x that speed), play the rise into take-off (from
+    # the crouch's lowest centre of mass, at most ``push_off_lead`` s back) up to ``push_off_speedup`` x
+    # faster, holding the crouch for the time freed, so that the body leaves the floor at the speed its
+    # flight needs (docs/decisions/projection.md: "a push-off fast enough for the flight").
+    push_off: bool = False
+    push_off_speedup: float = 2.0
+    push_off_lead: float = 0.5  # s
+    push_off_margin: float = 1.1
 
 
 def shape_reference(model, qpos: np.ndarray, dt: float, config: ShapingConfig | None = None) -> np.ndarray:
@@ -88,6 +98,8 @@ def shape_reference(model, qpos: np.ndarray, dt: float, config: ShapingConfig | 
     geo.feet += shift[:, None]
     if cfg.clearance > 0.0:
         _lift_swing_feet(model, out, geo, dt, cfg)
+    if cfg.push_off:
+        out = push_off(model, out, dt, cfg)
     if cfg.ballistic_flight:
         out = ballistic_flight(model, out, dt, cfg.support, cfg.float_window, cfg.ballistic_max)
     return out
@@ -110,11 +122,7 @@ def ballistic_flight(
     a metre up. Frames the move puts into the floor are raised back out of it.
     """
     out = qpos.copy()
-    low = _lowest(model, qpos)
-    air = low > support
-    edges = np.flatnonzero(np.diff(np.r_[0, air.astype(np.int8), 0]))
-    spans = [(s - 1, e) for s, e in zip(edges[::2], edges[1::2]) if s > 0 and e < len(qpos)]
-    spans = [(a, b) for a, b in spans if (b - a) * dt <= longest]
+    spans = _flight_spans(model, qpos, dt, support, longest)
     if not spans:
         return out
     com = _com_positions(model, qpos)
@@ -132,6 +140,53 @@ def ballistic_flight(
         rows = np.concatenate(moved)
         out[rows, 2] -= np.minimum(_lowest(model, out[rows]), 0.0)
     return out
+
+
+def push_off(model, qpos: np.ndarray, dt: float, config: ShapingConfig) -> np.ndarray:
+    """qpos (N, 70) at step ``dt`` with the rise into each flight phase played faster where the flight
+    needs a faster take-off (a new array; ``ShapingConfig.push_off``).
+
+    A flight phase is as in :func:`ballistic_flight`, from its take-off frame a. Its centre of mass rises
+    ``rise`` above a's, which takes a vertical speed of sqrt(2 g rise) at a; where the reference leaves
+    the floor slower than that by more than ``push_off_margin``, the frames from the crouch (the lowest
+    centre of mass within ``push_off_lead`` s before a) to a are replayed faster by the ratio of the two
+    speeds (at most ``push_off_speedup``), ending at a, after the crouch pose is held for the time freed.
+    Every pose is one of the reference's own, so feet that stand stay where they stood. A generated jump
+    often goes on rising for a few frames after its feet have left the floor, which no body can do; its
+    tracker left the floor at the reference's speed and flew lower (docs/decisions/projection.md: "a
+    push-off fast enough for the flight").
+    """
+    out = qpos.copy()
+    spans = _flight_spans(model, qpos, dt, config.support, config.float_window)
+    if not spans:
+        return out
+    com = _com_heights(model, qpos)
+    lead = int(round(config.push_off_lead / dt))
+    for a, b in spans:
+        rise = com[a : b + 1].max() - com[a]
+        have = (com[a] - com[a - 1]) / dt if a > 0 else 0.0
+        need = np.sqrt(2.0 * STANDARD_GRAVITY * max(rise, 0.0))
+        if have <= 0.0 or need <= config.push_off_margin * have:
+            continue
+        crouch = a
+        while crouch > max(a - lead, 0) and com[crouch] > com[crouch - 1]:
+            crouch -= 1
+        if a - crouch < 2:  # no rise to replay
+            continue
+        pace = max(have / need, 1.0 / config.push_off_speedup)  # < 1: source frames per frame
+        frames = np.arange(crouch, a + 1, dtype=np.float64)
+        out[crouch : a + 1] = qpos_at(qpos, np.maximum(a - (a - frames) / pace, crouch))
+    return out
+
+
+def _flight_spans(model, qpos: np.ndarray, dt: float, support: float, longest: float) -> list[tuple[int, int]]:
+    """Flight phases of qpos (N, 70) at step ``dt``: (take-off frame, landing frame) pairs around each run
+    of frames with no geom within ``support`` of the floor, at most ``longest`` seconds from one to the
+    other, with a frame on the floor at both ends."""
+    air = _lowest(model, qpos) > support
+    edges = np.flatnonzero(np.diff(np.r_[0, air.astype(np.int8), 0]))
+    spans = [(s - 1, e) for s, e in zip(edges[::2], edges[1::2]) if s > 0 and e < len(qpos)]
+    return [(a, b) for a, b in spans if (b - a) * dt <= longest]
 
 
 def to_floor(model, qpos: np.ndarray, dt: float, float_window: float) -> np.ndarray:
