@@ -149,8 +149,9 @@ def push_off(model, qpos: np.ndarray, dt: float, config: ShapingConfig) -> np.nd
     A flight phase is as in :func:`ballistic_flight`, from its take-off frame a. Its centre of mass rises
     ``rise`` above a's, which takes a vertical speed of sqrt(2 g rise) at a; where the reference leaves
     the floor slower than that by more than ``push_off_margin``, the frames from the crouch (the lowest
-    centre of mass within ``push_off_lead`` s before a) to a are replayed faster by the ratio of the two
-    speeds (at most ``push_off_speedup``), ending at a, after the crouch pose is held for the time freed.
+    centre of mass within ``push_off_lead`` s before a) to a are replayed faster (at most
+    ``push_off_speedup`` x), so that its last step rises at that speed, ending at a, after the crouch pose is
+    held for the time freed.
     Every pose is one of the reference's own, so feet that stand stay where they stood. A generated jump
     often goes on rising for a few frames after its feet have left the floor, which no body can do; its
     tracker left the floor at the reference's speed and flew lower (docs/decisions/projection.md: "a
@@ -173,9 +174,12 @@ def push_off(model, qpos: np.ndarray, dt: float, config: ShapingConfig) -> np.nd
             crouch -= 1
         if a - crouch < 2:  # no rise to replay
             continue
-        pace = max(have / need, 1.0 / config.push_off_speedup)  # < 1: source frames per frame
-        frames = np.arange(crouch, a + 1, dtype=np.float64)
-        out[crouch : a + 1] = qpos_at(qpos, np.maximum(a - (a - frames) / pace, crouch))
+        # The frame before take-off becomes the pose where the rise was need x dt under take-off's height,
+        # so that the last step leaves at that speed: 1 / pace source frames per frame (at most the bound).
+        before = np.interp(com[a] - need * dt, com[crouch : a + 1], np.arange(crouch, a + 1))
+        pace = max(1.0 / (a - before), 1.0 / config.push_off_speedup)
+        frames = np.arange(crouch + 1, a, dtype=np.float64)  # the crouch and the take-off stay as they are
+        out[crouch + 1 : a] = qpos_at(qpos, np.maximum(a - (a - frames) / pace, crouch))
     return out
 
 

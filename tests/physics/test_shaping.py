@@ -277,3 +277,61 @@ def test_a_hover_is_not_made_ballistic(walk_qpos) -> None:
     np.testing.assert_array_equal(kept, stand)
     flung = ballistic_flight(model, stand, DT, cfg.support, 1.0)
     assert (flung[:, 2] - stand[:, 2]).max() > 0.15
+
+
+@pytest.fixture(scope="module")
+def generated_jump():
+    """(model, qpos (N, 70)) the shipped model's plain sample of "a person jumps forward" (seed 0, 6 s) as
+    generation's P shapes it, but with its push-off as sampled: its centre of mass rises about 25 cm over a
+    flight that leaves the floor at about 1.5 m/s, where such a rise takes about 2.2 m/s (measured)."""
+    from dataclasses import replace
+
+    from physmotion.diffusion.model import MotionDiffusion
+    from physmotion.diffusion.physdiff import on_data_floor
+    from physmotion.generate import GenerateConfig, generate
+    from physmotion.physics.projection import ProjectionConfig, prepare_motion
+
+    sample = generate(["a person jumps forward"], GenerateConfig(seconds=6.0, physics="none", seed=0),
+                      model=MotionDiffusion.load()).motions[0].joints  # fmt: skip
+    config = ProjectionConfig.sampling()
+    config = replace(config, shaping=replace(config.shaping, push_off=False))
+    prep = prepare_motion(on_data_floor(sample).astype(np.float64), 20.0, config)
+    return prep.model, prep.target
+
+
+def test_a_slow_take_off_is_played_faster(generated_jump) -> None:
+    """``push_off``: only the frames from a crouch to a take-off change; each such window ends on its
+    take-off frame as it was, starts on the crouch pose held, and holds the reference's own poses in
+    between (every hinge within the range it had there); the body leaves the floor faster than it did, at
+    the speed the flight's rise needs or the most the speed-up's bound allows."""
+    from physmotion.physics.shaping import _com_heights, _flight_spans, push_off
+    from physmotion.physics.tracking import STANDARD_GRAVITY
+
+    model, qpos = generated_jump
+    cfg = ShapingConfig(push_off=True)
+    out = push_off(model, qpos, DT, cfg)
+    changed = np.abs(out - qpos).max(axis=1) > 0
+    assert changed.any()
+    edges = np.flatnonzero(np.diff(np.r_[0, changed.astype(np.int8), 0]))
+    takeoffs = {a: b for a, b in _flight_spans(model, qpos, DT, cfg.support, cfg.float_window)}
+    com, com_out = _com_heights(model, qpos), _com_heights(model, out)
+    for start, stop in zip(edges[::2], edges[1::2]):  # changed frames start..stop-1
+        crouch, a = start - 1, stop  # the crouch frame and the take-off frame are kept as they were
+        assert a in takeoffs and np.array_equal(out[a], qpos[a]) and np.array_equal(out[crouch], qpos[crouch])
+        window = qpos[crouch : a + 1, 7:]
+        assert np.all(out[start:stop, 7:] >= window.min(axis=0) - 1e-9)
+        assert np.all(out[start:stop, 7:] <= window.max(axis=0) + 1e-9)
+        have, now = (com[a] - com[a - 1]) / DT, (com_out[a] - com_out[a - 1]) / DT
+        need = np.sqrt(2 * STANDARD_GRAVITY * (com[a : takeoffs[a] + 1].max() - com[a]))
+        print(f"\ntake-off at step {a}: {have:.2f} -> {now:.2f} m/s, the rise needs {need:.2f}")
+        # At most: the rise of the last push_off_speedup steps (none before the crouch) in one step.
+        most = (com[a] - np.interp(max(a - cfg.push_off_speedup, crouch), np.arange(len(com)), com)) / DT
+        # 0.9: the replay is timed on the centre of mass interpolated between frames, not posed.
+        assert now > cfg.push_off_margin * have and now >= 0.9 * min(need, most)
+
+
+def test_a_walk_has_no_push_off(walk_qpos) -> None:
+    from physmotion.physics.shaping import push_off
+
+    model, qpos = walk_qpos
+    np.testing.assert_array_equal(push_off(model, qpos, DT, ShapingConfig(push_off=True)), qpos)
