@@ -517,9 +517,6 @@ def qvel_from_qpos(qpos: np.ndarray, dt: float, scheme: str = "central") -> np.n
     return v if batched else v[0]
 
 
-__all__ = ["NQ", "NV", "joints_to_qpos", "qpos_to_joints", "qpos_to_local", "qvel_from_qpos"]
-
-
 def qpos_at(qpos: np.ndarray, times: np.ndarray, fps: float = 1.0) -> np.ndarray:
     """qpos (T, 70), whose frame i is at time i / fps, read at ``times`` (N,) within its span: (N, 70), the
     hinges and root position linearly, the root quaternion by slerp (fps 1: fractional frame indices)."""
@@ -532,5 +529,9 @@ def qpos_at(qpos: np.ndarray, times: np.ndarray, fps: float = 1.0) -> np.ndarray
     if len(qpos) == 1:
         out[:, 3:7] = qpos[0, 3:7]
         return out
-    out[:, 3:7] = Slerp(t_in, Rotation.from_quat(qpos[:, 3:7], scalar_first=True))(times).as_quat(scalar_first=True)
+    rots = Rotation.from_quat(qpos[:, 3:7], scalar_first=True)
+    out[:, 3:7] = Slerp(t_in, rots)(times).as_quat(scalar_first=True)
     return out
+
+
+__all__ = ["NQ", "NV", "joints_to_qpos", "qpos_at", "qpos_to_joints", "qpos_to_local", "qvel_from_qpos"]

@@ -20,6 +20,10 @@ are in docs/decisions/projection.md:
   the path gravity allows between take-off and landing: retargeted onto our humanoid's masses, a captured
   flight is not free fall, and the feed-forward asked the root residual for the difference
   (docs/decisions/projection.md: "residual within 0.1 W on walks and runs").
+- :func:`push_off` (generation's P only) replays the rise into a flight faster where the flight needs a
+  faster take-off than the reference has: a generated jump often goes on rising after its feet leave the
+  floor, and the tracker, leaving at the reference's speed, flew lower (docs/decisions/projection.md: "a
+  push-off fast enough for the flight").
 - Support by speed (``stance_by_speed``): a generated swing foot that dips under the floor makes
   grounding raise the frame, and the slow stance foot then hangs centimetres up; such a swing foot is
   lifted above the stance foot and the frame lowered onto it (docs/decisions/projection.md: "support found by
@@ -183,7 +187,8 @@ def push_off(model, qpos: np.ndarray, dt: float, config: ShapingConfig) -> np.nd
     return out
 
 
-def _flight_spans(model, qpos: np.ndarray, dt: float, support: float, longest: float) -> list[tuple[int, int]]:
+def _flight_spans(model, qpos: np.ndarray, dt: float, support: float,
+                  longest: float) -> list[tuple[int, int]]:  # fmt: skip
     """Flight phases of qpos (N, 70) at step ``dt``: (take-off frame, landing frame) pairs around each run
     of frames with no geom within ``support`` of the floor, at most ``longest`` seconds from one to the
     other, with a frame on the floor at both ends."""
