@@ -86,6 +86,9 @@ class ShapingConfig:
     # faster, holding the crouch for the time freed, so that the body leaves the floor at the speed its
     # flight needs (docs/decisions/projection.md: "a push-off fast enough for the flight").
     push_off: bool = False
+    # m: a flight whose centre of mass rises less is a stride or a hover (a generated walk's frames that
+    # float a few centimetres for 0.1 s: rises of 2.5-3 cm), not a jump, and keeps its pace
+    push_off_rise: float = 0.05
     push_off_speedup: float = 2.0
     push_off_lead: float = 0.5  # s
     push_off_margin: float = 1.1
@@ -151,7 +154,8 @@ def push_off(model, qpos: np.ndarray, dt: float, config: ShapingConfig) -> np.nd
     needs a faster take-off (a new array; ``ShapingConfig.push_off``).
 
     A flight phase is as in :func:`ballistic_flight`, from its take-off frame a. Its centre of mass rises
-    ``rise`` above a's, which takes a vertical speed of sqrt(2 g rise) at a; where the reference leaves
+    ``rise`` above a's (at least ``push_off_rise``: a jump), which takes a vertical speed of sqrt(2 g rise)
+    at a; where the reference leaves
     the floor slower than that by more than ``push_off_margin``, the frames from the crouch (the lowest
     centre of mass within ``push_off_lead`` s before a) to a are replayed faster (at most
     ``push_off_speedup`` x), so that its last step rises at that speed, ending at a, after the crouch pose is
@@ -171,7 +175,7 @@ def push_off(model, qpos: np.ndarray, dt: float, config: ShapingConfig) -> np.nd
         rise = com[a : b + 1].max() - com[a]
         have = (com[a] - com[a - 1]) / dt if a > 0 else 0.0
         need = np.sqrt(2.0 * STANDARD_GRAVITY * max(rise, 0.0))
-        if have <= 0.0 or need <= config.push_off_margin * have:
+        if rise < config.push_off_rise or have <= 0.0 or need <= config.push_off_margin * have:
             continue
         crouch = a
         while crouch > max(a - lead, 0) and com[crouch] > com[crouch - 1]:
