@@ -81,10 +81,11 @@ class ShapingConfig:
     ballistic_flight: bool = True
     ballistic_max: float = 0.05  # m
     # push_off: before each such flight phase whose centre of mass rises more than its take-off speed
-    # carries it (sqrt(2 g rise) over ``push_off_margin`` x that speed), play the rise into take-off (from
-    # the crouch's lowest centre of mass, at most ``push_off_lead`` s back) up to ``push_off_speedup`` x
-    # faster, holding the crouch for the time freed, so that the body leaves the floor at the speed its
-    # flight needs (docs/decisions/projection.md: "a push-off fast enough for the flight").
+    # carries it (sqrt(2 g rise) over ``push_off_margin`` x that speed, and within ``push_off_speedup`` x),
+    # play the rise into take-off (from the crouch's lowest centre of mass, at most ``push_off_lead`` s
+    # back) up to ``push_off_speedup`` x faster, holding the crouch for the time freed, so that the body
+    # leaves the floor at the speed its flight needs (docs/decisions/projection.md: "a push-off fast enough
+    # for the flight").
     push_off: bool = False
     # m: a flight whose centre of mass rises less is a stride or a hover (a generated walk's frames that
     # float a few centimetres for 0.1 s: rises of 2.5-3 cm), not a jump, and keeps its pace
@@ -156,7 +157,9 @@ def push_off(model, qpos: np.ndarray, dt: float, config: ShapingConfig) -> np.nd
     A flight phase is as in :func:`ballistic_flight`, from its take-off frame a. Its centre of mass rises
     ``rise`` above a's (at least ``push_off_rise``: a jump), which takes a vertical speed of sqrt(2 g rise)
     at a; where the reference leaves
-    the floor slower than that by more than ``push_off_margin``, the frames from the crouch (the lowest
+    the floor slower than that by more than ``push_off_margin`` (but no slower than 1 / ``push_off_speedup``
+    of it: a body that rises with hardly any push-off floats, and a faster replay only disturbs the body
+    before it), the frames from the crouch (the lowest
     centre of mass within ``push_off_lead`` s before a) to a are replayed faster (at most
     ``push_off_speedup`` x), so that its last step rises at that speed, ending at a, after the crouch pose is
     held for the time freed.
@@ -175,7 +178,8 @@ def push_off(model, qpos: np.ndarray, dt: float, config: ShapingConfig) -> np.nd
         rise = com[a : b + 1].max() - com[a]
         have = (com[a] - com[a - 1]) / dt if a > 0 else 0.0
         need = np.sqrt(2.0 * STANDARD_GRAVITY * max(rise, 0.0))
-        if rise < config.push_off_rise or have <= 0.0 or need <= config.push_off_margin * have:
+        slow = config.push_off_margin * have < need <= config.push_off_speedup * have
+        if rise < config.push_off_rise or not slow:  # no jump; fast enough; or a float no replay could launch
             continue
         crouch = a
         while crouch > max(a - lead, 0) and com[crouch] > com[crouch - 1]:
