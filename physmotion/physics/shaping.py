@@ -156,13 +156,11 @@ def push_off(model, qpos: np.ndarray, dt: float, config: ShapingConfig) -> np.nd
 
     A flight phase is as in :func:`ballistic_flight`, from its take-off frame a. Its centre of mass rises
     ``rise`` above a's (at least ``push_off_rise``: a jump), which takes a vertical speed of sqrt(2 g rise)
-    at a; where the reference leaves
-    the floor slower than that by more than ``push_off_margin`` (but no slower than 1 / ``push_off_speedup``
-    of it: a body that rises with hardly any push-off floats, and a faster replay only disturbs the body
-    before it), the frames from the crouch (the lowest
-    centre of mass within ``push_off_lead`` s before a) to a are replayed faster (at most
-    ``push_off_speedup`` x), so that its last step rises at that speed, ending at a, after the crouch pose is
-    held for the time freed.
+    at a. Where the reference leaves the floor slower than that by more than ``push_off_margin``, but no
+    slower than 1 / ``push_off_speedup`` of it (a body that rises with hardly any push-off floats, and a
+    faster replay only disturbs the body before it), the frames from the crouch (the lowest centre of
+    mass within ``push_off_lead`` s before a) to a are replayed faster, at most ``push_off_speedup`` x, so
+    that the last step before a rises at that speed; the crouch pose is held for the time freed.
     Every pose is one of the reference's own, so feet that stand stay where they stood. A generated jump
     often goes on rising for a few frames after its feet have left the floor, which no body can do; its
     tracker left the floor at the reference's speed and flew lower (docs/decisions/projection.md: "a
