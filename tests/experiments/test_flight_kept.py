@@ -19,6 +19,7 @@ def test_every_variant_is_the_sampling_preset_with_one_change() -> None:
     assert _variant("fallback").fallback and not base.fallback
     assert base.recover and not _variant("no_recover").recover
     assert base.reach_arms and not _variant("copied_arms").reach_arms
+    assert base.shaping.push_off and not _variant("no_push_off").shaping.push_off
     through = _variant("feet_through_actuators").tracking  # the feet balance, through the actuators
     assert through.feet_balance and through.feet_through_actuators and not base.tracking.feet_balance
     searched = _variant("search")  # the search has no outside hand, so no fallback or recovery either

@@ -327,6 +327,7 @@ def test_a_generated_jump_keeps_its_flight_with_a_faster_push_off() -> None:
     kept = [flight_height(r.joints) / flight_height(x) for r in (as_sampled, pushed)]
     print(f"\nflight kept {kept[0]:.2f} as sampled, {kept[1]:.2f} with the push-off")
     assert kept[0] < 0.6 and kept[1] >= 0.8 and pushed.resets == 0
+    assert not ProjectionConfig().shaping.push_off  # the plain P, for captured motion, keeps its pace
 
 
 def test_a_first_frame_off_the_motions_path_is_mended_before_p_starts(walk: np.ndarray) -> None:
