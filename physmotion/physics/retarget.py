@@ -21,7 +21,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+from scipy.spatial.transform import Rotation, Slerp
 
 from physmotion.errors import ShapeError
 from physmotion.physics.frames import from_mujoco, rot_from_mujoco, rot_to_mujoco, to_mujoco
