@@ -520,7 +520,6 @@ def qvel_from_qpos(qpos: np.ndarray, dt: float, scheme: str = "central") -> np.n
 def qpos_at(qpos: np.ndarray, times: np.ndarray, fps: float = 1.0) -> np.ndarray:
     """qpos (T, 70), whose frame i is at time i / fps, read at ``times`` (N,) within its span: (N, 70), the
     hinges and root position linearly, the root quaternion by slerp (fps 1: fractional frame indices)."""
-    from scipy.spatial.transform import Slerp
 
     t_in = np.arange(len(qpos)) / fps
     out = np.empty((len(times), qpos.shape[1]))
