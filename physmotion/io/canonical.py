@@ -15,7 +15,8 @@ Steps, in order, and why in that order:
    frame is fixed by the hips first (:func:`_rigid_pelvis`), so legs and feet stay exact and the
    misfit sits at spine1 (measured: :attr:`Canonical.fit_mean`, ``fit_max``).
 5. Place: the root's XZ at the origin at frame 0, the body facing +Z at frame 0
-   (:func:`skeleton.facing_direction`; its left is then +X), and the stance soles over the whole clip
+   (:func:`skeleton.facing_direction`; its left is then +X), a capture floor tilted against the up
+   axis levelled (:func:`physmotion.io.floor.floor_tilt`), and the stance soles over the whole clip
    on y = 0, the physical metrics' floor (:func:`physmotion.io.floor.ground`; frame 0's lowest foot
    joint, the rule before, left captured clips 2-3 cm in the floor and moved exported motions).
    A rig whose files are already placed (:attr:`RigTable.placed`: our own BVH export) keeps the
@@ -25,14 +26,14 @@ Steps, in order, and why in that order:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from physmotion.conventions import FPS
 from physmotion.errors import MotionFormatError, PhysmotionError
-from physmotion.io.floor import FRAME0, IMPORT_FLOORS, STANCE, Grounding, ground
+from physmotion.io.floor import FRAME0, IMPORT_FLOORS, STANCE, Grounding, floor_tilt, ground
 from physmotion.io.rigs import RigMotion, RigTable
 from physmotion.skeleton import (
     FOOT_JOINTS,
@@ -145,7 +146,9 @@ def canonicalize(
         grounding = Grounding(0.0, 0.0, 0.0, 0.0)
     else:
         joints, rotations = _place(joints, rotations)
+        joints, rotations, tilt = _level(joints, rotations)
         joints, grounding = ground(joints, FPS)  # a vertical shift: rotations and offsets keep
+        grounding = replace(grounding, tilt=tilt)
     return Canonical(
         joints, rotations, offsets, bool(dropped), misfit.mean(axis=0), misfit.max(axis=0), grounding
     )
@@ -277,6 +280,19 @@ def _rigid_pelvis(joints: np.ndarray) -> np.ndarray:
     out = joints.copy()
     out[:, spine1] = joints[:, pelvis] + frame @ np.median(local, axis=0)
     return out
+
+
+def _level(joints: np.ndarray, rotations: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """The clip rotated so its capture floor is level (:func:`physmotion.io.floor.floor_tilt`), the root
+    kept over the origin at frame 0; and the degrees it turned."""
+    tilt = floor_tilt(joints, FPS)
+    if np.allclose(tilt, np.eye(3)):
+        return joints, rotations, 0.0
+    levelled = joints @ tilt.T
+    levelled[..., [0, 2]] -= levelled[0, 0, [0, 2]]
+    rotations = rotations.copy()
+    rotations[:, 0] = tilt @ rotations[:, 0]
+    return levelled, rotations, float(np.degrees(np.arccos(np.clip(tilt[1, 1], -1.0, 1.0))))
 
 
 def _place(

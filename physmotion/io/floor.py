@@ -15,6 +15,12 @@ with a flat hand). The importer grounds a motion in that same convention:
    minimisers (:func:`best_floor`, exact). A clip with no contact frame (a hop cut from take-off to
    landing) puts its lowest point over the clip on the floor.
 
+A capture floor tilted against the file's up axis (CMU's subjects 2, 5 and 7 stand on a plane rising
+1.5-2 cm a metre) is levelled first (:func:`floor_tilt`): a plane fitted to the standing feet over the
+directions the clip travels far enough to measure, and the whole clip rotated, root included, so that
+plane is level. A rigid rotation of the world: no pose changes (docs/decisions/data.md, "a tilted
+capture floor levelled").
+
 Ground that is not level (a walk over steps or rough ground) has no single floor: where the body's lowest
 point over the contact frames spreads wider than :data:`UNEVEN_GROUND`, :class:`Grounding` says so
 (``level`` False) and the importer warns (:class:`UnevenGroundWarning`).
@@ -30,6 +36,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from physmotion.conventions import FPS, UP_AXIS
 from physmotion.errors import PhysmotionWarning, ShapeError
@@ -43,6 +50,15 @@ UNEVEN_GROUND: float = 0.15
 """m: contact frames whose lowest points spread (5th to 95th percentile) wider than this stand on ground that
 is not level. CMU's "walk on uneven terrain" takes spread 0.24-0.34 m, every other clip of our data at most
 0.12 m (a body lying down; docs/decisions/data.md, "ground that is not level")."""
+TILT_MIN: float = 0.005
+"""Rise per metre of the fitted floor plane below which a clip is left as captured (Bandai's own floors
+fit at most 0.4 % on the median clip)."""
+TILT_MAX: float = 0.05
+"""... and above which the plane is not a tilted floor but a walk up or down something: left alone."""
+TILT_SPAN: float = 0.5
+"""m: standard deviation of the standing feet's horizontal positions along a direction below which that
+direction's slope is not measured (about 2 m of travel: a clip that stays in place has no slope to fit,
+and over shorter spans HDM05's hops and lying down fitted 1-8 % from landings and bodies on the floor)."""
 _TOLERANCE = 0.005  # m: the metrics' Penetrate and Float tolerance (MetricParams.tolerance)
 
 STANCE: str = "stance"
@@ -66,6 +82,8 @@ class Grounding:
     stance_share: float
     hand_share: float
     stance_spread: float = 0.0
+    tilt: float = 0.0
+    """Degrees the floor was levelled by (:func:`floor_tilt`); 0 where it was left as captured."""
 
     @property
     def level(self) -> bool:
@@ -121,6 +139,41 @@ def best_floor(lowest: np.ndarray, contact: np.ndarray) -> float:
     lo = points[right >= 0].min()  # the lowest minimiser: the first breakpoint the slope leaves <= 0 at
     hi = points[left <= 0].max()  # the highest: the last the slope reaches >= 0 at
     return float(0.5 * (lo + hi))
+
+
+def floor_tilt(joints: np.ndarray, fps: float = FPS) -> np.ndarray:
+    """(3, 3) the rotation that levels the floor the standing feet of ``joints`` (T, 22, 3, metres, Y up)
+    stand on; the identity where the clip's floor is level, unmeasurable or no floor at all.
+
+    The body's lowest surface point over the stance frames is fitted, least squares, by a plane over the
+    horizontal position of the lowest foot joint, along the principal directions of those positions
+    whose spread reaches :data:`TILT_SPAN` (a slope across a straight walk cannot be seen, so it is taken
+    as 0). A slope under :data:`TILT_MIN` or over :data:`TILT_MAX`, or standing points spread off the
+    plane wider than :data:`UNEVEN_GROUND` (steps, not a tilt), is left alone; levelling a levelled clip
+    finds no slope."""
+    from physmotion.physics.surface import HumanoidSurface
+
+    x = np.asarray(joints, dtype=np.float64)
+    stance = stance_frames(x, fps)
+    if stance.sum() < 3:
+        return np.eye(3)
+    lowest = HumanoidSurface().lowest_height(x)[stance]  # (S,)
+    feet = x[stance][:, list(FOOT_JOINTS)]  # (S, 4, 3)
+    foot = feet[np.arange(len(feet)), feet[..., UP_AXIS].argmin(axis=1)][:, [0, 2]]  # (S, 2) x, z
+    centred = foot - foot.mean(axis=0)
+    variance, directions = np.linalg.eigh(centred.T @ centred / len(centred))
+    measured = directions[:, np.sqrt(np.maximum(variance, 0.0)) >= TILT_SPAN]  # (2, D)
+    if measured.shape[1] == 0:
+        return np.eye(3)
+    design = np.column_stack([centred @ measured, np.ones(len(centred))])
+    coef = np.linalg.lstsq(design, lowest, rcond=None)[0]
+    slope = measured @ coef[:-1]  # (2,) rise per metre along x and z
+    off_plane = np.subtract(*np.percentile(lowest - design @ coef, [95, 5]))
+    if not TILT_MIN <= np.linalg.norm(slope) <= TILT_MAX or off_plane > UNEVEN_GROUND:
+        return np.eye(3)
+    normal = np.array([-slope[0], 1.0, -slope[1]]) / np.sqrt(1.0 + slope @ slope)
+    axis = np.cross(normal, [0.0, 1.0, 0.0])  # normal -> +Y
+    return Rotation.from_rotvec(axis / np.linalg.norm(axis) * np.arccos(normal[1])).as_matrix()
 
 
 def ground(joints: np.ndarray, fps: float = FPS) -> tuple[np.ndarray, Grounding]:

@@ -14,10 +14,11 @@ import pytest
 
 from physmotion.errors import PhysmotionError
 from physmotion.io import ClipInfo, import_clip, import_clip_with_report, save_bvh
-from physmotion.io.floor import UnevenGroundWarning, best_floor, ground, hand_frames, stance_frames
+from physmotion.io.floor import UnevenGroundWarning, best_floor, floor_tilt, ground, hand_frames, stance_frames
 from physmotion.metrics.physical import penetrate
 from physmotion.motion import Motion
 from physmotion.physics.surface import HumanoidSurface
+from scipy.spatial.transform import Rotation
 
 
 def _penetrate(joints: np.ndarray, fps: float) -> float:
@@ -82,6 +83,40 @@ def test_stance_frames_of_hops(hdm05_manifest: list[ClipInfo]) -> None:
     assert with_stance and without  # both kinds are in the data
 
 
+def _floor_slope(joints: np.ndarray) -> float:
+    """Rise per metre of the body's lowest point over the stance frames, along the clip's main direction
+    of travel: a straight line fitted by numpy (not floor_tilt's plane)."""
+    x = joints.astype(np.float64)
+    stance = stance_frames(x)
+    root = x[stance][:, 0, [0, 2]]
+    along = (root - root.mean(axis=0)) @ np.linalg.svd(root - root.mean(axis=0), full_matrices=False)[2][0]
+    return float(np.polyfit(along, HumanoidSurface().lowest_height(x)[stance], 1)[0])
+
+
+def test_a_tilted_capture_floor_is_levelled(clip) -> None:
+    """CMU subject 7's walks stand on a floor rising about 1.9 cm a metre along the walk (1.1 degrees;
+    Penetrate 9.5 mm and the standing frames up to 4.6 cm over a level floor on this take). The import
+    turns the clip so that floor is level; a second levelling finds nothing to do."""
+    motion, report = import_clip_with_report(clip("cmuiclone_07_04"))
+    assert 0.8 < report.grounding.tilt < 1.4
+    assert abs(_floor_slope(motion.joints)) < 0.003  # 0.019 before the levelling
+    assert np.array_equal(floor_tilt(motion.joints), np.eye(3))
+    assert _penetrate(motion.joints, motion.fps) < 4.0  # 9.5 mm before
+
+
+def test_a_known_tilt_is_undone_and_a_level_floor_left(clip) -> None:
+    """A Bandai walk (a level floor: left as captured) tilted by 1.5 degrees about its sideways axis: the
+    rotation found undoes it to 0.1 degrees. Standing in place, nothing is measured."""
+    motion, report = import_clip_with_report(clip("bandai2_dataset-2_walk_normal_001"))
+    joints = motion.joints.astype(np.float64)
+    assert report.grounding.tilt == 0.0 and np.array_equal(floor_tilt(joints), np.eye(3))
+    tilt = Rotation.from_euler("x", 1.5, degrees=True)
+    found = Rotation.from_matrix(floor_tilt(joints @ tilt.as_matrix().T))
+    assert np.degrees((found * tilt).magnitude()) < 0.1
+    still = np.repeat(joints[:1], 60, axis=0)  # one standing frame held for 3 s
+    assert np.array_equal(floor_tilt(still @ tilt.as_matrix().T), np.eye(3))
+
+
 def _every_clip(import_results, hdm05_results) -> dict[str, tuple[str, Motion, object]]:
     out: dict[str, tuple[str, Motion, object]] = {}
     for results in (import_results, hdm05_results):
@@ -97,6 +132,7 @@ def test_a_walk_over_uneven_ground_is_named(clip) -> None:
     with pytest.warns(UnevenGroundWarning, match=r"03_01\.amc: the body stands at heights \d+ cm apart"):
         _, uneven = import_clip_with_report(clip("cmu_03_01"))
     assert not uneven.grounding.level and uneven.grounding.stance_spread > 0.2
+    assert uneven.grounding.tilt == 0.0  # steps up and down are not a tilted floor
     with warnings.catch_warnings():
         warnings.simplefilter("error", UnevenGroundWarning)
         _, level = import_clip_with_report(clip("bandai2_dataset-2_walk_normal_001"))
