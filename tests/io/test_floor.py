@@ -11,14 +11,21 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from physmotion.errors import PhysmotionError
 from physmotion.io import ClipInfo, import_clip, import_clip_with_report, save_bvh
-from physmotion.io.floor import UnevenGroundWarning, best_floor, floor_tilt, ground, hand_frames, stance_frames
+from physmotion.io.floor import (
+    UnevenGroundWarning,
+    best_floor,
+    floor_tilt,
+    ground,
+    hand_frames,
+    stance_frames,
+)
 from physmotion.metrics.physical import penetrate
 from physmotion.motion import Motion
 from physmotion.physics.surface import HumanoidSurface
-from scipy.spatial.transform import Rotation
 
 
 def _penetrate(joints: np.ndarray, fps: float) -> float:
