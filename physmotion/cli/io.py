@@ -36,7 +36,7 @@ def import_motion(
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
     """Import one mocap file to the 22-joint skeleton at 20 fps, Y up, facing +Z, its stance soles on the
-    floor (y = 0)."""
+    floor (y = 0; a tilted capture floor is levelled first, and the summary says so)."""
     from physmotion.io.rigs import RIGS, describe_rig
 
     if rig == "list":
@@ -47,13 +47,17 @@ def import_motion(
         raise PhysmotionError("import needs a FILE and -o OUT (or --rig list to see the rig tables)")
     _check_out(out, overwrite, MOTION_SUFFIXES)
     _check_preview(out, overwrite)
-    from physmotion.io.importer import import_clip
+    from physmotion.io.importer import import_clip_with_report
     from physmotion.render import save_with_preview
 
-    motion = import_clip(path, rig=rig, mapping=mapping, asf=asf, fps=fps, up_axis=up_axis, units=units)
+    motion, report = import_clip_with_report(
+        path, rig=rig, mapping=mapping, asf=asf, fps=fps, up_axis=up_axis, units=units
+    )
     files = save_with_preview(motion, out, preview, title=path.name)
-    console.print(f"wrote {' and '.join(map(str, files))}: {motion.num_frames} frames, {motion.seconds:.1f} s",
-                  highlight=False)  # fmt: skip
+    tilt = report.grounding.tilt
+    levelled = f"; its capture floor, tilted {tilt:.1f} degrees, levelled" if tilt else ""
+    console.print(f"wrote {' and '.join(map(str, files))}: {motion.num_frames} frames, {motion.seconds:.1f} s"
+                  f"{levelled}", highlight=False)  # fmt: skip
 
 
 @app.command("export")
