@@ -63,7 +63,8 @@ def test_import_refuses_to_overwrite_without_the_flag(mocap_dir: Path, tmp_path:
 def test_import_says_where_it_levelled_a_tilted_floor(mocap_dir: Path, tmp_path: Path) -> None:
     """CMU subject 7's floor rises 1.9 cm a metre (docs/decisions/data.md, "a tilted capture floor
     levelled"): the summary line says it was levelled; a Bandai walk's floor is level and says nothing."""
-    res = run("import", mocap_dir / "cmu_iclone/subjects/007/007_04.bvh", "-o", tmp_path / "a.npz", "--no-preview")
+    walk = mocap_dir / "cmu_iclone/subjects/007/007_04.bvh"
+    res = run("import", walk, "-o", tmp_path / "a.npz", "--no-preview")
     assert res.returncode == 0 and "its capture floor, tilted 1.1 degrees, levelled" in res.stdout, res.stderr
     res = run("import", mocap_dir / BANDAI_WALK, "-o", tmp_path / "b.npz", "--no-preview")
     assert res.returncode == 0 and "wrote" in res.stdout and "tilted" not in res.stdout, res.stderr
