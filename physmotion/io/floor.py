@@ -15,7 +15,7 @@ with a flat hand). The importer grounds a motion in that same convention:
    minimisers (:func:`best_floor`, exact). A clip with no contact frame (a hop cut from take-off to
    landing) puts its lowest point over the clip on the floor.
 
-A capture floor tilted against the file's up axis (CMU's subjects 2, 5 and 7 stand on a plane rising
+A capture floor tilted against the file's up axis (CMU's subjects 2, 5, 6 and 7 stand on a plane rising
 1.5-2 cm a metre) is levelled first (:func:`floor_tilt`): a plane fitted to the standing feet over the
 directions the clip travels far enough to measure, and the whole clip rotated, root included, so that
 plane is level. A rigid rotation of the world: no pose changes (docs/decisions/data.md, "a tilted
