@@ -16,7 +16,7 @@ with a flat hand). The importer grounds a motion in that same convention:
    landing) puts its lowest point over the clip on the floor.
 
 A capture floor tilted against the file's up axis (CMU's subjects 2, 5, 6 and 7 stand on a plane rising
-1.5-2 cm a metre) is levelled first (:func:`floor_tilt`): a plane fitted to the standing feet over the
+up to 2 cm a metre) is levelled first (:func:`floor_tilt`): a plane fitted to the standing feet over the
 directions the clip travels far enough to measure, and the whole clip rotated, root included, so that
 plane is level. A rigid rotation of the world: no pose changes (docs/decisions/data.md, "a tilted
 capture floor levelled").
@@ -171,9 +171,8 @@ def floor_tilt(joints: np.ndarray, fps: float = FPS) -> np.ndarray:
     off_plane = np.subtract(*np.percentile(lowest - design @ coef, [95, 5]))
     if not TILT_MIN <= np.linalg.norm(slope) <= TILT_MAX or off_plane > UNEVEN_GROUND:
         return np.eye(3)
-    normal = np.array([-slope[0], 1.0, -slope[1]]) / np.sqrt(1.0 + slope @ slope)
-    axis = np.cross(normal, [0.0, 1.0, 0.0])  # normal -> +Y
-    return Rotation.from_rotvec(axis / np.linalg.norm(axis) * np.arccos(normal[1])).as_matrix()
+    normal = np.array([-slope[0], 1.0, -slope[1]])
+    return Rotation.align_vectors([[0.0, 1.0, 0.0]], [normal])[0].as_matrix()  # the shortest turn onto +Y
 
 
 def ground(joints: np.ndarray, fps: float = FPS) -> tuple[np.ndarray, Grounding]:
