@@ -2,6 +2,8 @@
 model: one table from one run.
 
 Usage: python -m experiments.physdiff_quality [--model DIR] [--prompts 32] [--seeds 0,1,2] [--out STEM]
+       python -m experiments.physdiff_quality --runs-from A.json B.json [--out STEM]
+       (one table from runs made apart, e.g. the seeds in parallel processes: their runs and seeds joined)
        python -m experiments.physdiff_quality --set new [--model DIR] [--seeds 0] [--out STEM]
        (either with --fine-step: every projection at 1/720 s, P's presets ``sampling_fine`` and ``fine``, as
        ``generate --fine-step``; or --tau M: the generation P's reset threshold, 0.15 m in the sampling preset)
@@ -24,9 +26,11 @@ per category and mode, so that runs and jumps read on their own.
 from __future__ import annotations
 
 import argparse
+import json
 import time
 from collections.abc import Sequence
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
@@ -92,7 +96,12 @@ def main(argv: list[str] | None = None) -> None:
                         help="every projection at 1/720 s (generate --fine-step)")
     parser.add_argument("--tau", type=float, default=None,
                         help="the generation P's reset threshold in metres (default: the sampling preset's)")
+    parser.add_argument("--runs-from", type=Path, nargs="+", default=None,
+                        help="no generation: one table from these files' runs (physics set, same settings)")
     args = parse_args(parser, argv)
+    if args.runs_from:
+        _join(args.runs_from, argv, args)
+        return
     seeds = [int(s) for s in args.seeds.split(",")]
     model = MotionDiffusion.load(args.model)
     presets = {"physdiff, post": "sampling_fine" if args.fine_step else "sampling",
@@ -115,7 +124,13 @@ def _physics_prompts(model: MotionDiffusion, seeds: list[int], base: GenerateCon
     """The physics prompt set: one row per mode (means over the seeds); the table, the runs, the settings."""
     prompts = PHYSICS_PROMPTS[:count]
     runs = [compare_modes(model, prompts, MODES, replace(base, seed=seed)) for seed in seeds]
-    title = (f"physics modes, {len(prompts)} prompts, 6 s each{_step(base)}, mean over seeds "
+    table = _physics_table(runs, seeds, len(prompts), base)
+    return table, runs, {"prompts": len(prompts), "seconds": base.seconds}
+
+
+def _physics_table(runs: list[dict], seeds: list[int], prompts: int, base: GenerateConfig) -> str:
+    """The physics set's table from its runs, one per seed."""
+    title = (f"physics modes, {prompts} prompts, 6 s each{_step(base)}, mean over seeds "
              f"{','.join(map(str, seeds))}")
     ref = {m: np.mean([r[m]["phys_err"] for r in runs]) for m in ("none", "none+floor")}
     rows = []
@@ -131,7 +146,31 @@ def _physics_prompts(model: MotionDiffusion, seeds: list[int], base: GenerateCon
                      *(falls if projected else ["-"] * len(falls)), f"{mean['seconds_per_motion']:.2f}"))  # fmt: skip
     header = ("mode", "Penetrate", "Float", "Skate", "Phys-Err", "vs none", "vs none+floor",
               "per seed (vs none+floor)", "no fall", "reset", "resets", *HELP_HEADER, "s/motion")  # fmt: skip
-    return f"# {title}\n\n{markdown_table(header, rows)}\n", runs, {"prompts": len(prompts), "seconds": base.seconds}
+    return f"# {title}\n\n{markdown_table(header, rows)}\n"
+
+
+def _join(files: list[Path], argv: list[str] | None, args: argparse.Namespace) -> None:
+    """``--runs-from``: the runs of ``files`` (physics set, one commit, one setting) as one results file."""
+    parts = [json.loads(Path(f).read_text()) for f in files]
+    first = parts[0]["meta"]
+    same = ("commit", "dirty", "preset", "prompts", "seconds", "sim_dt", "tau", "model_steps")
+    for part, f in zip(parts, files):
+        meta = part["meta"]
+        if meta.get("set", "physics") != "physics" or any(meta.get(k) != first.get(k) for k in same):
+            raise SystemExit(f"error: {f}: not a physics-set run with the settings of {files[0]}")
+    seeds = [seed for part in parts for seed in part["meta"]["seeds"]]
+    runs = [run for part in parts for run in part["runs"]]
+    if len(set(seeds)) != len(seeds):
+        raise SystemExit(f"error: a seed appears twice in {', '.join(map(str, files))}")
+    base = GenerateConfig(seconds=first["seconds"], sampler=ddim_50(),
+                          projection=replace(preset(first["preset"]["physdiff, post"]), tau=first["tau"]))
+    md = _physics_table(runs, seeds, first["prompts"], base)
+    print(md)
+    settings = {k: first[k] for k in ("model_steps", "sim_dt", "tau", "prompts", "seconds") if k in first}
+    meta = run_meta(__file__, argv, args.tree, first["preset"], seeds=seeds, **settings)
+    # the figures are the parts': their commit and tree, and how each was made
+    meta.update(commit=first["commit"], dirty=first["dirty"], parts=[p["meta"]["command"] for p in parts])
+    write_results(args.out or "results/physdiff_quality", md, {"meta": meta, "runs": runs})
 
 
 # P's help in the tables (eval.physics_columns.residual_columns): the root residual, its share of frames at

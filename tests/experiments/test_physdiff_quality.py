@@ -34,3 +34,20 @@ def test_physdiff_quality_writes_its_json(tmp_path: Path) -> None:
     assert "residual_force" not in run["none"]
     for column in ("root force W mean / p95 (at cap)", "root torque W m mean / p95", "torque over limit"):
         assert column in res.stdout
+    # --runs-from joins runs made apart (the seeds in parallel processes) into one table and file; a run
+    # with other settings is refused. The second part here is the first relabelled as seed 1.
+    other = tmp_path / "seed1.json"
+    other.write_text(json.dumps({**data, "meta": {**data["meta"], "seeds": [1]}}))
+    joined = tmp_path / "joined"
+    res = subprocess.run([sys.executable, "-m", "experiments.physdiff_quality", "--runs-from",
+                          str(out.with_suffix(".json")), str(other), "--out", str(joined), "--allow-dirty"],
+                         cwd=ROOT, capture_output=True, text=True, timeout=120, check=False)  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    both = json.loads(joined.with_suffix(".json").read_text())
+    assert both["meta"]["seeds"] == [0, 1] and both["runs"] == [run, run] and len(both["meta"]["parts"]) == 2
+    assert both["meta"]["tau"] == 0.25 and "mean over seeds 0,1" in joined.with_suffix(".md").read_text()
+    other.write_text(json.dumps({**data, "meta": {**data["meta"], "seeds": [1], "tau": 0.15}}))
+    res = subprocess.run([sys.executable, "-m", "experiments.physdiff_quality", "--runs-from",
+                          str(out.with_suffix(".json")), str(other), "--out", str(joined), "--allow-dirty"],
+                         cwd=ROOT, capture_output=True, text=True, timeout=120, check=False)  # fmt: skip
+    assert res.returncode != 0 and "not a physics-set run with the settings of" in res.stderr
