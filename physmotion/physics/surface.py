@@ -135,7 +135,7 @@ class HumanoidSurface:
     its standing pitch) that box pointed its tip 1-2 cm into the floor while the toe joint stood 1-6 cm
     above it (captured CMU walks). Here each toe box takes the pitch, within the toe hinge's range, that
     holds its lowest point highest (:func:`toe_lowest`): the toes bend as the floor bends them, as the
-    simulated humanoid's toe hinges do (docs/decisions/data.md "toes that bend").
+    simulated humanoid's toe hinges do (docs/decisions/metrics.md "toes that bend").
 
     Hands: the simulated humanoid has no wrist joint, so its hand box runs on along the forearm to
     0.19 m past the wrist (PHC's hand; fingertips of a hand held straight). A pose read from joints
