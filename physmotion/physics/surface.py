@@ -132,9 +132,10 @@ class HumanoidSurface:
 
     Toes: the 22-joint skeleton's toe joint is a leaf, so the joints say nothing of the toes' bend and
     retargeting leaves the toe box rigid with the foot. At a push-off (foot pitched 20-60 degrees past
-    its standing pitch) that box pointed its tip 1-2 cm into the floor while the toe joint stood 1-6 cm
-    above it (captured CMU walks). Here each toe box takes the pitch, within the toe hinge's range, that
-    holds its lowest point highest (:func:`toe_lowest`): the toes bend as the floor bends them, as the
+    its standing pitch) that box pointed its tip 1-3 cm into the floor while the toe joint stood 1-6 cm
+    above it (captured CMU walks). Here a toe box that reaches under the floor is bent up to it, as far
+    as the toe hinge's range allows (:func:`toe_lowest`); one that clears the floor keeps its pose. The
+    heights therefore depend on the floor (``floor`` below): the toes bend as the floor bends them, as the
     simulated humanoid's toe hinges do (docs/decisions/metrics.md "toes that bend").
 
     Hands: the simulated humanoid has no wrist joint, so its hand box runs on along the forearm to
@@ -210,7 +211,8 @@ class HumanoidSurface:
         return np.minimum(h.rest, _bent(h.feet[..., _TOES], h.toes, floor).min(axis=-1))
 
     def foot_heights(self, joints: np.ndarray, floor: float = 0.0) -> np.ndarray:
-        """(..., T, 4) lowest point of the foot patches in FOOT_JOINTS order (heel, toe, heel, toe), m."""
+        """(..., T, 4) lowest point of the foot patches in FOOT_JOINTS order (heel, toe, heel, toe), m; the
+        toes bent by a floor at height ``floor``, as in :meth:`lowest_height`."""
         h = self._per_frame(joints)
         feet = h.feet.copy()
         feet[..., _TOES] = _bent(h.feet[..., _TOES], h.toes, floor)
