@@ -124,13 +124,14 @@ def _physics_prompts(model: MotionDiffusion, seeds: list[int], base: GenerateCon
     """The physics prompt set: one row per mode (means over the seeds); the table, the runs, the settings."""
     prompts = PHYSICS_PROMPTS[:count]
     runs = [compare_modes(model, prompts, MODES, replace(base, seed=seed)) for seed in seeds]
-    table = _physics_table(runs, seeds, len(prompts), base)
+    p = base.projection
+    table = _physics_table(runs, seeds, len(prompts), _step(p.humanoid.sim_dt, p.tau))
     return table, runs, {"prompts": len(prompts), "seconds": base.seconds}
 
 
-def _physics_table(runs: list[dict], seeds: list[int], prompts: int, base: GenerateConfig) -> str:
-    """The physics set's table from its runs, one per seed."""
-    title = (f"physics modes, {prompts} prompts, 6 s each{_step(base)}, mean over seeds "
+def _physics_table(runs: list[dict], seeds: list[int], prompts: int, step: str) -> str:
+    """The physics set's table from its runs, one per seed; ``step``: :func:`_step`'s words for P."""
+    title = (f"physics modes, {prompts} prompts, 6 s each{step}, mean over seeds "
              f"{','.join(map(str, seeds))}")
     ref = {m: np.mean([r[m]["phys_err"] for r in runs]) for m in ("none", "none+floor")}
     rows = []
@@ -162,9 +163,7 @@ def _join(files: list[Path], argv: list[str] | None, args: argparse.Namespace) -
     runs = [run for part in parts for run in part["runs"]]
     if len(set(seeds)) != len(seeds):
         raise SystemExit(f"error: a seed appears twice in {', '.join(map(str, files))}")
-    base = GenerateConfig(seconds=first["seconds"], sampler=ddim_50(),
-                          projection=replace(preset(first["preset"]["physdiff, post"]), tau=first["tau"]))
-    md = _physics_table(runs, seeds, first["prompts"], base)
+    md = _physics_table(runs, seeds, first["prompts"], _step(first["sim_dt"], first["tau"]))
     print(md)
     settings = {k: first[k] for k in ("model_steps", "sim_dt", "tau", "prompts", "seconds") if k in first}
     meta = run_meta(__file__, argv, args.tree, first["preset"], seeds=seeds, **settings)
@@ -194,10 +193,9 @@ def _help_cells(row: dict[str, float]) -> list[str]:
             f"{row['residual_torque']:.3f} / {row['residual_torque_p95']:.3f}", f"{100 * row['over_limit']:.1f}%"]
 
 
-def _step(base: GenerateConfig) -> str:
-    """The projection's simulation step and reset threshold, for a table title."""
-    p = base.projection
-    return f", P at 1/{round(1 / p.humanoid.sim_dt)} s, reset at {p.tau:g} m"
+def _step(sim_dt: float, tau: float) -> str:
+    """The projection's simulation step (s) and reset threshold (m), for a table title."""
+    return f", P at 1/{round(1 / sim_dt)} s, reset at {tau:g} m"
 
 
 def _new_prompts(model: MotionDiffusion, seeds: list[int], base: GenerateConfig,
@@ -205,7 +203,8 @@ def _new_prompts(model: MotionDiffusion, seeds: list[int], base: GenerateConfig,
     """One row per category and mode of NEW_PROMPTS (means over the category's prompts and the seeds)."""
     runs = {cat: [compare_modes(model, list(prompts), NEW_SET_MODES, replace(base, seed=seed)) for seed in seeds]
             for cat, prompts in NEW_PROMPTS.items()}  # fmt: skip
-    title = (f"unseen prompts ({sum(map(len, NEW_PROMPTS.values()))}), 6 s each{_step(base)}, "
+    p, total = base.projection, sum(map(len, NEW_PROMPTS.values()))
+    title = (f"unseen prompts ({total}), 6 s each{_step(p.humanoid.sim_dt, p.tau)}, "
              f"seeds {','.join(map(str, seeds))}, model steps {model.info.get('steps')}")
     rows = []
     for cat, cat_runs in runs.items():
