@@ -493,15 +493,16 @@ def flight_search_quotes() -> list[str]:
 
 
 def import_floor_quotes() -> list[str]:
-    """Where imported clips meet the floor (results/import_floor.json): the uneven-ground clips, and mean
-    Penetrate per source over the level clips."""
+    """Where imported clips meet the floor (results/import_floor.json): the uneven-ground clips, mean
+    Penetrate per source over the level clips, and the clips at 2 mm or more."""
     src = _load("import_floor.json")["sources"]
     level = {k: v["penetrate_level_mean"] for k, v in src.items()}
-    others = max(v for k, v in level.items() if k != "cmu_iclone")
-    return [f"({sum(v['not_level'] for v in src.values())} of {sum(v['clips'] for v in src.values())} clips",
-            f"at most {others:.1f} mm per source but cmu_iclone's {level['cmu_iclone']:.1f} mm",
-            f"(cmu_amc {level['cmu_amc']:.1f} mm, {src['cmu_amc']['penetrate_mean']:.1f} mm with the uneven take)",
-            f"single clips reach {max(v['penetrate_level_max'] for v in src.values()):.1f} mm"]
+    clips = sum(v["clips"] for v in src.values())
+    return [f"({sum(v['not_level'] for v in src.values())} of {clips} clips",
+            f"at most {max(level.values()):.1f} mm per source (cmu_iclone {level['cmu_iclone']:.1f} mm;",
+            f"cmu_amc {level['cmu_amc']:.1f} mm, {src['cmu_amc']['penetrate_mean']:.1f} mm with the uneven",
+            f"single clips reach {max(v['penetrate_level_max'] for v in src.values()):.1f} mm",
+            f"and {sum(v['over_2mm'] for v in src.values())} of {clips} clips"]
 
 
 QUOTES = {  # which doc quotes which result file

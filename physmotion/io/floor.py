@@ -12,8 +12,10 @@ with a flat hand). The importer grounds a motion in that same convention:
 2. floor: the height f that minimises Penetrate + Float as the metrics define them (5 mm tolerance),
    Penetrate over every frame and Float over the contact frames only: a frame in the air may float, no
    frame may be in the floor. The sum is convex and piecewise linear in f; f is the middle of its
-   minimisers (:func:`best_floor`, exact). A clip with no contact frame (a hop cut from take-off to
-   landing) puts its lowest point over the clip on the floor.
+   minimisers (:func:`best_floor`, exact). The toe boxes bend where the floor meets them
+   (:class:`~physmotion.physics.surface.HumanoidSurface`), so the lowest point depends on f: f is
+   chosen again on the toes it bends until it stays. A clip with no contact frame (a hop
+   cut from take-off to landing) puts its lowest point over the clip on the floor.
 
 A capture floor tilted against the file's up axis (CMU's subjects 2, 5, 6 and 7 stand on a plane rising
 up to 2 cm a metre) is levelled first (:func:`floor_tilt`): a plane fitted to the standing feet over the
@@ -60,6 +62,8 @@ TILT_SPAN: float = 0.5
 direction's slope is not measured (about 2 m of travel: a clip that stays in place has no slope to fit,
 and over shorter spans HDM05's hops and lying down fitted 1-8 % from landings and bodies on the floor)."""
 _TOLERANCE = 0.005  # m: the metrics' Penetrate and Float tolerance (MetricParams.tolerance)
+_FLOOR_ROUNDS = 40  # at most, of choosing the floor and bending the toes to it (see ground()) ...
+_FLOOR_SETTLED = 1e-7  # m: ... until it moves less than this
 
 STANCE: str = "stance"
 """The import floor: least Penetrate + Float over the contact frames (this module)."""
@@ -157,7 +161,7 @@ def floor_tilt(joints: np.ndarray, fps: float = FPS) -> np.ndarray:
     stance = stance_frames(x, fps)
     if stance.sum() < 3:
         return np.eye(3)
-    lowest = HumanoidSurface().lowest_height(x)[stance]  # (S,)
+    lowest = HumanoidSurface().lowest_height(x, floor=np.inf)[stance]  # (S,) planted: toes pressed
     feet = x[stance][:, list(FOOT_JOINTS)]  # (S, 4, 3)
     foot = feet[np.arange(len(feet)), feet[..., UP_AXIS].argmin(axis=1)][:, [0, 2]]  # (S, 2) x, z
     centred = foot - foot.mean(axis=0)
@@ -183,11 +187,20 @@ def ground(joints: np.ndarray, fps: float = FPS) -> tuple[np.ndarray, Grounding]
     if x.ndim != 3 or x.shape[1:] != (NUM_JOINTS, 3) or len(x) == 0:
         raise ShapeError(f"joints must be (T, 22, 3), got {x.shape}")
     surface = HumanoidSurface()
-    lowest = surface.lowest_height(x)  # (T,) the body's lowest surface point
+    lowest = surface.lowest_height(x, floor=np.inf)  # (T,) the body's lowest surface point, toes pressed
     feet = stance_frames(x, fps)
     hands = hand_frames(x, surface.hand_heights(x), lowest, fps)
     contact = feet | hands
-    floor = best_floor(lowest, contact) if contact.any() else float(lowest.min())  # no contact: all in motion
+    floor = float(lowest.min())  # no contact: all in motion, the lowest point on the floor
+    if contact.any():
+        # The toes bend where the floor meets them, so the lowest point depends on the floor chosen:
+        # iterate to the floor that is best for the toes it bends. Most clips settle in 1-2 rounds; where
+        # the bent toes bound the best interval, its middle moves half the way each round (geometric).
+        for _ in range(_FLOOR_ROUNDS):
+            floor, before = best_floor(lowest, contact), floor
+            if abs(floor - before) < _FLOOR_SETTLED:
+                break
+            lowest = surface.lowest_height(x, floor=floor)
     spread = float(np.subtract(*np.percentile(lowest[contact], [95, 5]))) if contact.any() else 0.0
     out = x.copy()
     out[..., UP_AXIS] -= floor

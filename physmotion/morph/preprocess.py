@@ -70,7 +70,7 @@ def floor_first_frame(joints: np.ndarray, fps: float = FPS, physical: bool = Fal
 
     x = np.asarray(joints, dtype=np.float64)
     body = body_from_joints(x, fps)
-    low = float(HumanoidSurface(body).lowest_height(x[:1])[0])
+    low = float(HumanoidSurface(body).lowest_height(x[:1], floor=-np.inf)[0])  # toes as posed: just touching
     shift = np.zeros(3)
     shift[UP_AXIS] = -low - (0.0 if physical else foot_lift(body))
     return (x + shift).astype(np.asarray(joints).dtype)

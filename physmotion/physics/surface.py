@@ -10,11 +10,12 @@ model of :mod:`physmotion.metrics.geometry` assumes the default foot, and on Ban
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
 from physmotion.errors import ShapeError
-from physmotion.physics.humanoid import HumanoidConfig, body_from_joints, build_model
+from physmotion.physics.humanoid import HumanoidConfig, body_from_joints, build_model, hinge_range
 from physmotion.physics.retarget import joints_to_qpos
 from physmotion.skeleton import FOOT_JOINTS, JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
 
@@ -55,6 +56,53 @@ def lowest_of(model, geom_xpos: np.ndarray, geom_xmat: np.ndarray, geoms: np.nda
     return geom_xpos[..., geoms, 2] - reach
 
 
+_TOES = [i for i, j in enumerate(FOOT_JOINTS) if JOINT_NAMES[j].endswith("_foot")]  # FOOT_JOINTS' toe boxes
+
+
+class _Heights(NamedTuple):
+    """Posed heights (m) of a batch: ``rest`` (..., T) the lowest point of everything but the toe boxes;
+    ``feet`` (..., T, 4) the foot patches as posed (toes rigid with the foot); ``toes`` (..., T, 2) the
+    toe boxes bent to their highest (:func:`toe_lowest`); ``hands`` (..., T, 2) flat hands."""
+
+    rest: np.ndarray
+    feet: np.ndarray
+    toes: np.ndarray
+    hands: np.ndarray
+
+
+def _bent(posed: np.ndarray, highest: np.ndarray, floor: float) -> np.ndarray:
+    """A toe box's lowest point where a floor at ``floor`` bends it: as posed where it clears the floor,
+    else bent up to the floor, or as far as its hinge allows (``highest``)."""
+    return np.where(posed >= floor, posed, np.minimum(floor, highest))
+
+
+_BOX_CORNERS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=np.float64)
+_TOE_PITCH_STEP = np.radians(2.5)  # the pitches tried over the toe hinge's range (exact to ~1 mm)
+
+
+def toe_lowest(
+    model, xpos: np.ndarray, geom_xmat: np.ndarray, geom: int, config: HumanoidConfig
+) -> np.ndarray:
+    """Lowest height (T,) of the toe box ``geom`` when it pitches about its joint (the toe hinge's y,
+    within its range) to the angle that holds that lowest point highest: a toe the floor bends.
+
+    xpos: (T, nbody, 3) body positions and geom_xmat: (T, ngeom, 9) geom rotations of the posed frames
+    (:func:`pose_frames`). The box is axis-aligned in its body (the toe joint at the origin), so its
+    rotation is the body's and its corners are ``geom_pos`` +- ``geom_size``. At pitch 0 this is
+    :func:`lowest_of`; the best pitch is searched on a grid, both directions (a foot pitched up at a heel
+    strike levels its toes downwards).
+    """
+    lo, hi = hinge_range(model.geom(geom).name, "y", config)
+    beta = np.union1d(np.arange(lo, hi, _TOE_PITCH_STEP), [0.0, hi])  # (K,) radians, 0 included
+    c, s = np.cos(beta), np.sin(beta)
+    pitch = np.zeros((len(beta), 3, 3))  # (K, 3, 3) rotations about the body's y axis (MuJoCo frame)
+    pitch[:, 0, 0], pitch[:, 0, 2], pitch[:, 1, 1], pitch[:, 2, 0], pitch[:, 2, 2] = c, s, 1.0, -s, c
+    corners = model.geom_pos[geom] + _BOX_CORNERS * model.geom_size[geom]  # (8, 3) in the toe body
+    up = geom_xmat[:, geom, 6:9]  # (T, 3) the world z of the body's axes
+    height = np.einsum("ti,kni->tkn", up, np.einsum("kij,nj->kni", pitch, corners))  # (T, K, 8)
+    return xpos[:, model.geom_bodyid[geom], 2] + height.min(axis=-1).max(axis=-1)
+
+
 def pose_frames(model, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Forward kinematics of every frame of qpos (N, nq): body positions xpos (N, nbody, 3) and geom
     poses geom_xpos (N, ngeom, 3), geom_xmat (N, ngeom, 9). One C call per frame; the arithmetic on the
@@ -82,6 +130,14 @@ class HumanoidSurface:
     moved the soles by up to 10 mm against MuJoCo's (measured on generated motions).
     Foot patches: the ankle box (heel) and the toe box.
 
+    Toes: the 22-joint skeleton's toe joint is a leaf, so the joints say nothing of the toes' bend and
+    retargeting leaves the toe box rigid with the foot. At a push-off (foot pitched 20-60 degrees past
+    its standing pitch) that box pointed its tip 1-3 cm into the floor while the toe joint stood 1-6 cm
+    above it (captured CMU walks). Here a toe box that reaches under the floor is bent up to it, as far
+    as the toe hinge's range allows (:func:`toe_lowest`); one that clears the floor keeps its pose. The
+    heights therefore depend on the floor (``floor`` below): the toes bend as the floor bends them, as the
+    simulated humanoid's toe hinges do (docs/decisions/metrics.md "toes that bend").
+
     Hands: the simulated humanoid has no wrist joint, so its hand box runs on along the forearm to
     0.19 m past the wrist (PHC's hand; fingertips of a hand held straight). A pose read from joints
     says nothing of the wrist's bend, and a hand resting flat on the floor bends it ~90 degrees: the
@@ -104,11 +160,11 @@ class HumanoidSurface:
         elif offsets is not None:
             offsets = list(offsets)  # one body (or None) per motion
         self.offsets, self.config = offsets, config or HumanoidConfig()
-        self._cache: tuple[object, tuple[np.ndarray, np.ndarray]] | None = None
+        self._cache: tuple[object, _Heights] | None = None
 
-    def _per_frame(self, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(lowest (..., T), feet (..., T, 4), hands (..., T, 2)) heights in metres; the metrics ask for
-        more than one of the same array in turn, so the last result is kept."""
+    def _per_frame(self, joints: np.ndarray) -> _Heights:
+        """The posed heights of ``joints`` (..., T, 22, 3); the metrics ask for more than one of the same
+        array in turn, so the last result is kept."""
         # Keyed on the array object itself, held here: an id() alone can be reused by the next array
         # once the first is freed, and would then return another motion's heights.
         if self._cache is not None and self._cache[0] is joints:
@@ -116,8 +172,9 @@ class HumanoidSurface:
 
         x = np.asarray(joints, dtype=np.float64)
         flat = x.reshape((-1,) + x.shape[-3:])
-        lowest = np.zeros(flat.shape[:2])
+        rest = np.zeros(flat.shape[:2])
         feet = np.zeros(flat.shape[:2] + (4,))
+        toes = np.zeros(flat.shape[:2] + (2,))
         hands = np.zeros(flat.shape[:2] + (2,))
         for b, motion in enumerate(flat):
             offsets = self._body(b, len(flat))
@@ -125,14 +182,16 @@ class HumanoidSurface:
             model = build_model(offsets, self.config)
             patch = np.array([model.geom(JOINT_NAMES[j]).id for j in FOOT_JOINTS])
             hand = np.array([model.geom(JOINT_NAMES[j]).id for j in HAND_JOINTS])
-            others = np.setdiff1d(np.arange(1, model.ngeom), hand)  # every geom but the floor and hands
+            others = np.setdiff1d(np.arange(1, model.ngeom), np.concatenate([hand, patch[_TOES]]))
             xpos, gpos, gmat = pose_frames(model, joints_to_qpos(motion, model, config=self.config))
             wrist = np.array([model.body(JOINT_NAMES[j]).id for j in HAND_JOINTS])
             hands[b] = xpos[:, wrist, 2] - model.geom_size[hand, 1]  # flat hand: wrist less half thickness
-            lowest[b] = np.minimum(lowest_of(model, gpos, gmat, others).min(axis=-1), hands[b].min(axis=-1))
+            rest[b] = np.minimum(lowest_of(model, gpos, gmat, others).min(axis=-1), hands[b].min(axis=-1))
             feet[b] = lowest_of(model, gpos, gmat, patch)
-        result = (lowest.reshape(x.shape[:-2]), feet.reshape(x.shape[:-2] + (4,)),
-                  hands.reshape(x.shape[:-2] + (2,)))  # fmt: skip
+            toes[b] = np.stack([toe_lowest(model, xpos, gmat, g, self.config) for g in patch[_TOES]], axis=-1)
+        shape = x.shape[:-2]
+        result = _Heights(rest.reshape(shape), feet.reshape(shape + (4,)), toes.reshape(shape + (2,)),
+                          hands.reshape(shape + (2,)))  # fmt: skip
         self._cache = (joints, result)
         return result
 
@@ -145,15 +204,23 @@ class HumanoidSurface:
             raise ShapeError(f"{len(given)} bodies given for {count} motions")
         return given[b]
 
-    def lowest_height(self, joints: np.ndarray) -> np.ndarray:
-        return self._per_frame(joints)[0]
+    def lowest_height(self, joints: np.ndarray, floor: float = 0.0) -> np.ndarray:
+        """(..., T) the body's lowest point, m, its toes bent by a floor at height ``floor`` (np.inf: every
+        toe pressed as far as it bends, e.g. where the floor is not known yet)."""
+        h = self._per_frame(joints)
+        return np.minimum(h.rest, _bent(h.feet[..., _TOES], h.toes, floor).min(axis=-1))
 
-    def foot_heights(self, joints: np.ndarray) -> np.ndarray:
-        return self._per_frame(joints)[1]
+    def foot_heights(self, joints: np.ndarray, floor: float = 0.0) -> np.ndarray:
+        """(..., T, 4) lowest point of the foot patches in FOOT_JOINTS order (heel, toe, heel, toe), m; the
+        toes bent by a floor at height ``floor``, as in :meth:`lowest_height`."""
+        h = self._per_frame(joints)
+        feet = h.feet.copy()
+        feet[..., _TOES] = _bent(h.feet[..., _TOES], h.toes, floor)
+        return feet
 
     def hand_heights(self, joints: np.ndarray) -> np.ndarray:
         """(..., T, 2) lowest point of the left and right hand (a flat hand: see the class docstring)."""
-        return self._per_frame(joints)[2]
+        return self._per_frame(joints).hands
 
 
 _GROUNDING_PERCENTILES = np.arange(0, 55, 5)  # candidate floors: percentiles of the per-frame lowest point
@@ -181,10 +248,11 @@ def ground_on_surface(
 def surface_lift(joints: np.ndarray, body: np.ndarray, config: HumanoidConfig | None = None) -> float:
     """Metres to move a motion up (down if negative) for the least Phys-Err on the humanoid's surface.
 
-    Why not "the lowest point over the clip on the floor": the box feet dip their corners 15-30 mm below
-    the flat stance at heel strikes and toe-offs, so on captured walks that floor leaves the stance foot
-    floating (test split: Float 23 mm, Phys-Err 23 mm; docs/decisions/data.md: "floor convention"). The
-    candidates are the 0th to 50th percentiles of the per-frame lowest surface point.
+    Why not "the lowest point over the clip on the floor": the heel boxes dip their corners below the flat
+    stance at heel strikes (and, before the toes bent, the toe boxes 15-30 mm at toe-offs), so on captured
+    walks that floor left the stance foot floating (test split: Float 23 mm, Phys-Err 23 mm;
+    docs/decisions/data.md: "floor convention"). The candidates are the 0th to 50th percentiles of the
+    per-frame lowest surface point.
     joints: (T, 22, 3) metres, Y up; body: the humanoid's rest offsets (22, 3).
     """
     from physmotion.metrics.physical import phys_err
