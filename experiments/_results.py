@@ -11,44 +11,28 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import platform
 import shlex
-import subprocess
 import sys
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
 from physmotion.errors import PhysmotionError
 from physmotion.motion import write_atomic
+from physmotion.provenance import Checkout, checkout, cpu_model
 
 ROOT = Path(__file__).resolve().parents[1]
 Presets = str | dict[str, str] | None  # one preset, a preset per role or row, or None where P does not run
 
 
-@dataclass(frozen=True)
-class Tree:
-    """The checkout an experiment ran from: HEAD's short hash ("+dirty" appended where tracked files
-    differed from it) and whether they did."""
-
-    commit: str
-    dirty: bool
+Tree = Checkout  # the checkout an experiment ran from (physmotion.provenance)
 
 
 def tree_state(root: Path | None = None) -> Tree:
-    """The state of the git checkout at ``root`` (default: this repository). Tracked files only (``git
-    diff --quiet HEAD``, index and work tree): an untracked file does not count. Outside a git checkout
-    the commit is "unknown" and the tree counts as dirty (nothing says it is clean)."""
-
-    def git(*args: str) -> subprocess.CompletedProcess:
-        return subprocess.run(["git", *args], cwd=root or ROOT, capture_output=True, text=True, check=False)
-
-    head = git("rev-parse", "--short", "HEAD")
-    if head.returncode:
-        return Tree("unknown+dirty", True)
-    dirty = git("diff", "--quiet", "HEAD").returncode != 0  # 1: differences; anything else: cannot tell
-    return Tree(head.stdout.strip() + ("+dirty" if dirty else ""), dirty)
+    """The state of the git checkout at ``root`` (default: this repository); outside a git checkout the
+    commit reads "unknown+dirty" (nothing says it is clean)."""
+    state = checkout(root or ROOT)
+    return state if state.commit is not None else Tree("unknown+dirty", True)
 
 
 def parse_args(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> argparse.Namespace:
@@ -66,17 +50,6 @@ def parse_args(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> a
         raise SystemExit(f"error: {ROOT}: {where}; commit first so the figures name the code that "
                          "made them, or pass --allow-dirty")  # fmt: skip
     return args
-
-
-def cpu_model() -> str:
-    """The CPU's model name (``/proc/cpuinfo``), else what :func:`platform.processor` says."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def run_meta(script: str, argv: Sequence[str] | None, tree: Tree, preset: Presets, **extra) -> dict:

@@ -21,6 +21,7 @@ import csv
 import os
 import pickle
 import shutil
+import subprocess
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import replace
@@ -92,6 +93,25 @@ def _shared_dir(tmp_path_factory: pytest.TempPathFactory, name: str, make: Calla
             make(folder)
             (folder / ".done").write_text("")
     return folder
+
+
+def run_git(repo: Path, *args: str) -> str:
+    """``git *args`` in ``repo`` (an identity given, so commits work on a machine with none); its stdout."""
+    res = subprocess.run(["git", "-c", "user.name=t", "-c", "user.email=t@example.org", *args], cwd=repo,
+                         capture_output=True, text=True, check=True)  # fmt: skip
+    return res.stdout.strip()
+
+
+@pytest.fixture
+def git_repo(tmp_path: Path) -> Path:
+    """A real git repository with one committed file, ``code.py``."""
+    root = tmp_path / "repo"
+    root.mkdir()
+    run_git(root, "init", "-q")
+    (root / "code.py").write_text("x = 1\n")
+    run_git(root, "add", "code.py")
+    run_git(root, "commit", "-q", "-m", "first")
+    return root
 
 
 @pytest.fixture(scope="session")

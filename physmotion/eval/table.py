@@ -67,6 +67,7 @@ from physmotion.metrics.generation import (
 from physmotion.motion import write_atomic
 from physmotion.physics.surface import ground_on_surface
 from physmotion.pipelines.modes import DEFAULT_SCHEDULE, PhysicsMode
+from physmotion.provenance import provenance
 
 REAL = "real"
 GENERATION_COLUMNS = ("R@1", "R@2", "R@3", "FID", "MM-Dist", "Diversity", "MModality", "sec/motion")
@@ -247,7 +248,7 @@ def evaluate(
             "projection": projection_settings(cfg.base.projection),
             "morph_projection": projection_settings(cfg.base.morph_projection),
             "surface": cfg.surface, "seed": cfg.seed,
-            "data": str(data)}  # fmt: skip
+            "data": str(data), "made": provenance()}  # fmt: skip
     return EvalTable(rows=rows, meta=meta)
 
 

@@ -25,7 +25,6 @@ from __future__ import annotations
 import csv
 import json
 import os
-import platform
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -359,15 +358,9 @@ def _append_csv(path: Path, row: dict) -> None:
 
 
 def _hardware(device: str, processes: int) -> str:
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    text = f"{os.cpu_count()} x {cpu}, {processes} environment processes"
+    from physmotion.provenance import cpu_model
+
+    text = f"{os.cpu_count()} x {cpu_model()}, {processes} environment processes"
     if device.startswith("cuda"):
         import torch
 

@@ -10,48 +10,31 @@ import pytest
 
 from experiments import _results
 from experiments._results import Tree, tree_state
+from tests.conftest import run_git as _git
 
 
-def _git(repo: Path, *args: str) -> str:
-    res = subprocess.run(["git", "-c", "user.name=t", "-c", "user.email=t@example.org", *args], cwd=repo,
-                         capture_output=True, text=True, check=True)  # fmt: skip
-    return res.stdout.strip()
-
-
-@pytest.fixture
-def repo(tmp_path: Path) -> Path:
-    """A git repository with one committed file, ``code.py``."""
-    root = tmp_path / "repo"
-    root.mkdir()
-    _git(root, "init", "-q")
-    (root / "code.py").write_text("x = 1\n")
-    _git(root, "add", "code.py")
-    _git(root, "commit", "-q", "-m", "first")
-    return root
-
-
-def test_tree_state_reads_tracked_changes_only(repo: Path) -> None:
-    head = _git(repo, "rev-parse", "--short", "HEAD")
-    assert tree_state(repo) == Tree(head, False)
-    (repo / "notes.txt").write_text("untracked\n")  # untracked: still clean
-    assert tree_state(repo) == Tree(head, False)
-    (repo / "code.py").write_text("x = 2\n")  # a tracked file edited
-    assert tree_state(repo) == Tree(head + "+dirty", True)
-    _git(repo, "add", "code.py")  # staged but not committed: still dirty
-    assert tree_state(repo).dirty
-    _git(repo, "commit", "-q", "-m", "second")
-    assert tree_state(repo) == Tree(_git(repo, "rev-parse", "--short", "HEAD"), False)
+def test_tree_state_reads_tracked_changes_only(git_repo: Path) -> None:
+    head = _git(git_repo, "rev-parse", "--short", "HEAD")
+    assert tree_state(git_repo) == Tree(head, False)
+    (git_repo / "notes.txt").write_text("untracked\n")  # untracked: still clean
+    assert tree_state(git_repo) == Tree(head, False)
+    (git_repo / "code.py").write_text("x = 2\n")  # a tracked file edited
+    assert tree_state(git_repo) == Tree(head + "+dirty", True)
+    _git(git_repo, "add", "code.py")  # staged but not committed: still dirty
+    assert tree_state(git_repo).dirty
+    _git(git_repo, "commit", "-q", "-m", "second")
+    assert tree_state(git_repo) == Tree(_git(git_repo, "rev-parse", "--short", "HEAD"), False)
 
 
 def test_outside_a_checkout_counts_as_dirty(tmp_path: Path) -> None:
     assert tree_state(tmp_path) == Tree("unknown+dirty", True)
 
 
-def test_a_dirty_tree_is_refused_before_any_work(repo: Path, tmp_path: Path, monkeypatch) -> None:
+def test_a_dirty_tree_is_refused_before_any_work(git_repo: Path, tmp_path: Path, monkeypatch) -> None:
     from experiments.physics_raw_speed import main
 
-    monkeypatch.setattr(_results, "ROOT", repo)
-    (repo / "code.py").write_text("x = 2\n")
+    monkeypatch.setattr(_results, "ROOT", git_repo)
+    (git_repo / "code.py").write_text("x = 2\n")
     out = tmp_path / "raw"
     with pytest.raises(SystemExit) as exc:
         main(["--seconds", "0.1", "--repeats", "1", "--out", str(out)])
@@ -61,25 +44,25 @@ def test_a_dirty_tree_is_refused_before_any_work(repo: Path, tmp_path: Path, mon
     assert not list(tmp_path.glob("raw*"))  # nothing written
 
 
-def test_allow_dirty_runs_and_records_it(repo: Path, tmp_path: Path, monkeypatch) -> None:
+def test_allow_dirty_runs_and_records_it(git_repo: Path, tmp_path: Path, monkeypatch) -> None:
     from experiments.physics_raw_speed import main
 
-    monkeypatch.setattr(_results, "ROOT", repo)
-    head = _git(repo, "rev-parse", "--short", "HEAD")
-    (repo / "code.py").write_text("x = 2\n")
+    monkeypatch.setattr(_results, "ROOT", git_repo)
+    head = _git(git_repo, "rev-parse", "--short", "HEAD")
+    (git_repo / "code.py").write_text("x = 2\n")
     main(["--seconds", "0.1", "--repeats", "1", "--out", str(tmp_path / "raw"), "--allow-dirty"])
     meta = json.loads((tmp_path / "raw.json").read_text())["meta"]
     assert meta["dirty"] is True and meta["commit"] == head + "+dirty"
     assert meta["command"].endswith("--allow-dirty")
 
 
-def test_a_clean_tree_runs_without_the_flag(repo: Path, tmp_path: Path, monkeypatch) -> None:
+def test_a_clean_tree_runs_without_the_flag(git_repo: Path, tmp_path: Path, monkeypatch) -> None:
     from experiments.physics_raw_speed import main
 
-    monkeypatch.setattr(_results, "ROOT", repo)
+    monkeypatch.setattr(_results, "ROOT", git_repo)
     main(["--seconds", "0.1", "--repeats", "1", "--out", str(tmp_path / "raw")])
     meta = json.loads((tmp_path / "raw.json").read_text())["meta"]
-    assert meta["dirty"] is False and meta["commit"] == _git(repo, "rev-parse", "--short", "HEAD")
+    assert meta["dirty"] is False and meta["commit"] == _git(git_repo, "rev-parse", "--short", "HEAD")
 
 
 def test_every_experiment_that_writes_a_meta_takes_the_flag() -> None:
