@@ -25,8 +25,10 @@ class Checkout:
 
 
 def checkout(root: str | Path | None = None) -> Checkout:
-    """The state of the git checkout at ``root`` (default: the one this package runs from). Tracked files
-    only (``git diff --quiet HEAD``, index and work tree): an untracked file does not count."""
+    """The state of the git checkout whose root is ``root`` (default: the folder this package runs from).
+    Tracked files only (``git diff --quiet HEAD``, index and work tree): an untracked file does not count.
+    A folder that is not a checkout's root (a wheel installed into a venv inside some repository) has no
+    commit: that repository's would not be the package's."""
 
     def git(*args: str) -> subprocess.CompletedProcess | None:
         try:
@@ -35,8 +37,12 @@ def checkout(root: str | Path | None = None) -> Checkout:
         except (OSError, subprocess.TimeoutExpired):  # no git installed, or a hung filesystem
             return None
 
+    where = Path(root or _PACKAGE_ROOT).resolve()
+    top = git("rev-parse", "--show-toplevel")
+    if top is None or top.returncode or Path(top.stdout.strip()).resolve() != where:
+        return Checkout(None, True)  # not a checkout's root: e.g. a wheel in a venv inside some repository
     head = git("rev-parse", "--short", "HEAD")
-    if head is None or head.returncode:
+    if head is None or head.returncode:  # a repository with no commit yet
         return Checkout(None, True)
     diff = git("diff", "--quiet", "HEAD")
     dirty = diff is None or diff.returncode != 0  # 1: differences; anything else: cannot tell

@@ -23,8 +23,14 @@ def test_checkout_reads_tracked_changes_only(git_repo: Path) -> None:
     assert checkout(git_repo) == Checkout(head + "+dirty", True)
 
 
-def test_outside_a_checkout_there_is_no_commit(tmp_path: Path) -> None:
-    assert checkout(tmp_path) == Checkout(None, True)
+def test_outside_a_checkout_there_is_no_commit(tmp_path: Path, git_repo: Path) -> None:
+    beside = tmp_path / "elsewhere"  # a folder beside the repository, in none
+    beside.mkdir()
+    assert checkout(beside) == Checkout(None, True)
+    inside = git_repo / "venv" / "site-packages"  # a wheel installed into a venv inside some repository
+    inside.mkdir(parents=True)
+    assert checkout(inside) == Checkout(None, True)
+    assert checkout(tmp_path / "missing") == Checkout(None, True)
 
 
 def test_provenance_names_this_code_and_machine() -> None:
