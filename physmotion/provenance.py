@@ -69,7 +69,8 @@ def provenance() -> dict:
     code = checkout()
     return {"physmotion": __version__, "commit": code.commit, "dirty": code.dirty, "cpu": cpu_model(),
             "cores": os.cpu_count(), "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-            "python": platform.python_version(), "torch": _version("torch"), "mujoco": _version("mujoco")}  # fmt: skip
+            "python": platform.python_version(), "torch": _version("torch"),
+            "mujoco": _version("mujoco")}  # fmt: skip
 
 
 def _version(package: str) -> str | None:
