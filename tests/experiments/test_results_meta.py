@@ -3,27 +3,26 @@ from HEAD unless given --allow-dirty, and its meta then says "dirty": true. Run 
 git repository standing in for the project's checkout (experiments._results.ROOT)."""
 
 import json
-import subprocess
 from pathlib import Path
 
 import pytest
 
 from experiments import _results
 from experiments._results import Tree, tree_state
-from tests.conftest import run_git as _git
+from tests.conftest import run_git
 
 
 def test_tree_state_reads_tracked_changes_only(git_repo: Path) -> None:
-    head = _git(git_repo, "rev-parse", "--short", "HEAD")
+    head = run_git(git_repo, "rev-parse", "--short", "HEAD")
     assert tree_state(git_repo) == Tree(head, False)
     (git_repo / "notes.txt").write_text("untracked\n")  # untracked: still clean
     assert tree_state(git_repo) == Tree(head, False)
     (git_repo / "code.py").write_text("x = 2\n")  # a tracked file edited
     assert tree_state(git_repo) == Tree(head + "+dirty", True)
-    _git(git_repo, "add", "code.py")  # staged but not committed: still dirty
+    run_git(git_repo, "add", "code.py")  # staged but not committed: still dirty
     assert tree_state(git_repo).dirty
-    _git(git_repo, "commit", "-q", "-m", "second")
-    assert tree_state(git_repo) == Tree(_git(git_repo, "rev-parse", "--short", "HEAD"), False)
+    run_git(git_repo, "commit", "-q", "-m", "second")
+    assert tree_state(git_repo) == Tree(run_git(git_repo, "rev-parse", "--short", "HEAD"), False)
 
 
 def test_outside_a_checkout_counts_as_dirty(tmp_path: Path) -> None:
@@ -48,7 +47,7 @@ def test_allow_dirty_runs_and_records_it(git_repo: Path, tmp_path: Path, monkeyp
     from experiments.physics_raw_speed import main
 
     monkeypatch.setattr(_results, "ROOT", git_repo)
-    head = _git(git_repo, "rev-parse", "--short", "HEAD")
+    head = run_git(git_repo, "rev-parse", "--short", "HEAD")
     (git_repo / "code.py").write_text("x = 2\n")
     main(["--seconds", "0.1", "--repeats", "1", "--out", str(tmp_path / "raw"), "--allow-dirty"])
     meta = json.loads((tmp_path / "raw.json").read_text())["meta"]
@@ -62,7 +61,7 @@ def test_a_clean_tree_runs_without_the_flag(git_repo: Path, tmp_path: Path, monk
     monkeypatch.setattr(_results, "ROOT", git_repo)
     main(["--seconds", "0.1", "--repeats", "1", "--out", str(tmp_path / "raw")])
     meta = json.loads((tmp_path / "raw.json").read_text())["meta"]
-    assert meta["dirty"] is False and meta["commit"] == _git(git_repo, "rev-parse", "--short", "HEAD")
+    assert meta["dirty"] is False and meta["commit"] == run_git(git_repo, "rev-parse", "--short", "HEAD")
 
 
 def test_every_experiment_that_writes_a_meta_takes_the_flag() -> None:
