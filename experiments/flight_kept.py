@@ -66,6 +66,8 @@ def _variant(name: str):
         return replace(searched, search=replace(searched.search, cost=cost))
     if name == "no_push_off":  # the rise into a flight played as the motion has it, however slow
         return replace(base, shaping=replace(base.shaping, push_off=False))
+    if name == "rescue":  # the search re-does a take-off whose flight the body kept under 0.8 of (no hand)
+        return replace(base, rescue_flight=0.8)
     if name == "copied_arms":  # the arms' bone directions copied as they are, not fitted to the body first
         return replace(base, reach_arms=False)
     raise ValueError(f"unknown variant {name!r}")
@@ -73,7 +75,7 @@ def _variant(name: str):
 
 VARIANTS = ("sampling", "ballistic", "no_land", "ballistic_no_land", "lift_0.3", "feet_balance",
             "feet_through_actuators", "fallback", "no_recover", "search", "search_velocity", "copied_arms",
-            "no_push_off")
+            "no_push_off", "rescue")
 
 
 def _cpu_wall() -> np.ndarray:

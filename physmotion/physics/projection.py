@@ -30,9 +30,9 @@ from physmotion.features.humanml3d import FEATURE_DIM, recover_from_ric
 from physmotion.physics.humanoid import HumanoidConfig, body_from_joints, build_model, foot_lift, layout
 from physmotion.physics.retarget import joints_to_qpos, qpos_at, qpos_to_joints, reach_arm_ends
 from physmotion.physics.search import SearchConfig, SearchController, search_humanoid
-from physmotion.physics.shaping import ShapingConfig, shape_reference
+from physmotion.physics.shaping import ShapingConfig, flights, shape_reference
 from physmotion.physics.surface import body_lowest, pose_frames
-from physmotion.physics.sim import Recover, Recovery, Rollout, simulate
+from physmotion.physics.sim import FlightCheck, Recover, Recovery, Rollout, simulate
 from physmotion.physics.tracking import ModelBasedTracker, TrackingConfig, prepare_reference
 from physmotion.physics.workers import map_in_workers, worker_count
 from physmotion.skeleton import NUM_JOINTS
@@ -107,6 +107,12 @@ class ProjectionConfig:
     recover_back: float = 0.5
     recover_ahead: float = 0.5
     recover_retry_back: float = 1.0
+    # With recover: where the body has cleared the floor by less than ``rescue_flight`` x the shaped
+    # reference's clearance just past a flight's highest (a flight of at least ``metrics.dynamics.MIN_FLIGHT``),
+    # the search re-does that take-off the same way (no outside hand), kept where the body flies higher in it.
+    # The tracker's take-off speed turns on small details of the body and its contacts (docs/limitations.md);
+    # 0: off (docs/decisions/projection.md: "the search where a take-off falls short").
+    rescue_flight: float = 0.0
     # A first frame off the path of the next ones (its fastest joint moves into frame 1 more than
     # ``first_frame_margin`` beyond the fastest move of frame 1 -> 2: a denoiser's boundary artefact) is
     # replaced by the pose extrapolated back from frames 1 and 2 before P starts the body there; else the
@@ -148,6 +154,10 @@ class ProjectionConfig:
         if not all(0.0 <= s <= 5.0 for s in spans):
             raise ShapeError("recover_back, recover_ahead and recover_retry_back must be in 0..5 seconds, got "
                              + ", ".join(f"{s:g}" for s in spans))
+        if not 0.0 <= self.rescue_flight <= 1.0:
+            raise ShapeError(f"rescue_flight must be in 0..1, got {self.rescue_flight}")
+        if self.rescue_flight and not self.recover:
+            raise ShapeError("rescue_flight hands short take-offs to the search of recover: it needs recover")
         if not 0.0 <= self.fallback_flight <= 1.0:
             raise ShapeError(f"fallback_flight must be in 0..1, got {self.fallback_flight}")
 
@@ -482,7 +492,8 @@ def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig,
         ref = prepare_reference(model, reference, config.humanoid.control_dt, config.tracking)
         roll = simulate(model, ref, tracker, config.humanoid, fail_mpjpe=config.tau,
                         reset_on_fail=config.reset_on_fail, follow_drift=config.follow_drift,
-                        let_land=config.let_land, recover=_recovery(model, config) if config.recover else None)
+                        let_land=config.let_land, recover=_recovery(model, config) if config.recover else None,
+                        flights=_flight_checks(model, target, config), flight_kept=config.rescue_flight)
         out = _back_to_input_rate(roll, model, lift, x, fps, ctrl_fps, config.tau, config.reset_on_fail,
                                   grounded, config.crossfade)  # fmt: skip
         score = (not bool(out["success"]), float(out["mpjpe"].mean()))
@@ -558,7 +569,8 @@ def _recovery(model, config: ProjectionConfig) -> Recover:
     backs = [int(round(b * rate)) for b in backs]
     ahead = int(round(config.recover_ahead * rate))
 
-    def recover(ref, states: np.ndarray, k: int, earliest: int) -> Recovery | None:
+    def recover(ref, states: np.ndarray, k: int, earliest: int,
+                accept: Callable[[Recovery], bool] | None) -> Recovery | None:  # fmt: skip
         stop = min(len(ref.qpos), k + ahead + 1)
         starts: set[int] = set()
         for back in backs:
@@ -570,10 +582,25 @@ def _recovery(model, config: ProjectionConfig) -> Recover:
                                       config.tracking)  # fmt: skip
             roll, record = search.run(ref.window(start, stop), start=states[start])
             if roll.failed_at is None:
-                return Recovery(start, roll.qpos, record.qvel, roll.mpjpe, roll.contacts)
+                got = Recovery(start, roll.qpos, record.qvel, roll.mpjpe, roll.contacts)
+                if accept is None or accept(got):
+                    return got
         return None
 
     return recover
+
+
+def _flight_checks(model, target: np.ndarray, config: ProjectionConfig) -> list[FlightCheck]:
+    """The flights of the shaped reference target (N, 70) that ``simulate`` checks the body makes
+    (``ProjectionConfig.rescue_flight``; none when it is 0): each flight of the body's lowest point at least
+    ``metrics.dynamics.MIN_FLIGHT`` over the floor, judged one step past its highest."""
+    from physmotion.metrics.dynamics import MIN_FLIGHT
+
+    if not config.rescue_flight:
+        return []
+    sh = config.shaping
+    return [FlightCheck(a, top + 1, height) for a, top, height in
+            flights(model, target, config.humanoid.control_dt, sh.support, sh.float_window) if height >= MIN_FLIGHT]
 
 
 def _search_one(prep: PreparedMotion, x: np.ndarray, fps: float, config: ProjectionConfig,

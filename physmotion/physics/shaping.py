@@ -193,6 +193,17 @@ def push_off(model, qpos: np.ndarray, dt: float, config: ShapingConfig) -> np.nd
     return out
 
 
+def flights(model, qpos: np.ndarray, dt: float, support: float, longest: float) -> list[tuple[int, int, float]]:
+    """The flight phases of qpos (N, 70) at step ``dt`` (as :func:`ballistic_flight` finds them): for each,
+    its take-off frame, the frame where the body's lowest point is highest, and that height (m)."""
+    spans = _flight_spans(model, qpos, dt, support, longest)
+    if not spans:
+        return []
+    low = _lowest(model, qpos)
+    tops = [a + 1 + int(np.argmax(low[a + 1 : b])) for a, b in spans]
+    return [(a, top, float(low[top])) for (a, _), top in zip(spans, tops)]
+
+
 def _flight_spans(model, qpos: np.ndarray, dt: float, support: float,
                   longest: float) -> list[tuple[int, int]]:  # fmt: skip
     """Flight phases of qpos (N, 70) at step ``dt``: (take-off frame, landing frame) pairs around each run

@@ -12,14 +12,14 @@ stepping with the projection.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 
 from physmotion.physics.humanoid import HumanoidConfig, layout
-from physmotion.physics.surface import lowest_point
+from physmotion.physics.surface import body_lowest, lowest_point, pose_frames
 from physmotion.physics.tracking import STANDARD_GRAVITY, Controller, Reference
 from physmotion.skeleton import FOOT_JOINTS
 
@@ -134,8 +134,19 @@ class Recovery:
     contacts: np.ndarray
 
 
-# recover(ref, states (k + 1, nq + nv) of steps 0..k, k, earliest start) -> a Recovery ending after k, or None
-Recover = Callable[[Reference, np.ndarray, int, int], "Recovery | None"]
+# recover(ref, states (k + 1, nq + nv) of steps 0..k, k, earliest start, accept) -> a Recovery ending after k, or
+# None; accept (None: any): whether a stretch that did not fall is good enough to keep
+Recover = Callable[[Reference, np.ndarray, int, int, "Callable[[Recovery], bool] | None"], "Recovery | None"]
+
+
+class FlightCheck(NamedTuple):
+    """A flight of the reference that ``simulate`` checks the body makes: its take-off step, the step at which
+    the simulation's flight so far is judged (just past the reference's highest), and the reference body's
+    clearance over the floor at its highest (m)."""
+
+    takeoff: int
+    check: int
+    height: float
 
 
 def simulate(
@@ -148,6 +159,8 @@ def simulate(
     follow_drift: bool = False,
     let_land: bool = False,
     recover: Recover | None = None,
+    flights: Sequence[FlightCheck] = (),
+    flight_kept: float = 0.8,
 ) -> Rollout:
     """Run ``controller`` along ``ref`` (at the control rate of ``config``) from the reference's start.
 
@@ -165,7 +178,10 @@ def simulate(
     step to a later one (the search with no outside hand), and the episode goes on from there; a stretch
     it returned is not handed to it again, and where it returns None the reset happens as before
     (``recovered`` counts the stretches, ``recovered_steps`` marks them). A stretch it carried to the last
-    step is kept whatever its error there.
+    step is kept whatever its error there. With ``recover`` and ``flights``, a flight whose body has cleared
+    the floor by less than ``flight_kept`` x the reference's at the check step is handed to it too, and what
+    it returns is kept where the body flies higher in it (a take-off the tracker left too slowly, with no
+    reset to trigger it: docs/decisions/projection.md, "the search where a take-off falls short").
     """
     import mujoco
 
@@ -187,6 +203,24 @@ def simulate(
     reset_state(model, data, ref)
     failed_at, resets, shifts, recovered = None, 0, 0, 0
     earliest = 0  # the first step a recovery may start from: none goes back over an earlier one
+    checks = {f.check: f for f in flights if recover is not None and 0 < f.takeoff < f.check < n}
+    watch = np.zeros(n, dtype=bool)  # steps whose lowest point a flight check reads
+    for f in checks.values():
+        watch[f.takeoff : f.check + 1] = True
+    low = np.full(n, -np.inf)
+
+    def take(got: Recovery) -> int:
+        """Keep the recovered stretch in the rollout and put ``data`` at its end; returns that step."""
+        s, e = got.start, got.start + len(got.qpos) - 1
+        qpos[s : e + 1], mpjpe[s : e + 1], contacts[s : e + 1] = got.qpos, got.mpjpe, got.contacts
+        for a in (res_f, res_t, peak_f, peak_t):
+            a[s + 1 : e + 1] = 0.0  # no outside hand while it carries the body
+        over[s + 1 : e + 1] = at_cap[s + 1 : e + 1] = False
+        recovered_steps[s + 1 : e + 1] = True  # the steps it simulated, from the state at s
+        data.qpos[:], data.qvel[:] = got.qpos[-1], got.qvel[-1]
+        mujoco.mj_forward(model, data)
+        return e
+
     k = 0
     while True:
         qpos[k] = data.qpos
@@ -201,23 +235,26 @@ def simulate(
         contacts[k] = contacts_of(model, data, foot_bodies)
         if states is not None:
             states[k] = np.concatenate([data.qpos, data.qvel])
+        if watch[k]:
+            low[k] = lowest_point(model, data)
+        flight = checks.get(k)
+        if flight is not None and flight.takeoff > earliest and not recovered_steps[k]:
+            kept = float(low[flight.takeoff : k + 1].max())
+            if kept < flight_kept * flight.height:
+                got = recover(ref, states[: k + 1], k, earliest, lambda r: _clearance(model, r.qpos) > kept)
+                if got is not None:
+                    recovered += 1
+                    k = earliest = take(got)
+                    continue
         # A stretch the recovery carried to the last step stands: its controller judges a fall, not the error.
         carried_to_end = k == n - 1 and recovered_steps[k]
         if mpjpe[k] > fail_mpjpe and reset_on_fail and offset is None and not carried_to_end:
             # A body handed back still off the motion goes on with the search from where it was handed back.
             again = recover is not None and (k > earliest or recovered_steps[k])
-            got = recover(ref, states[: k + 1], k, earliest) if again else None
+            got = recover(ref, states[: k + 1], k, earliest, None) if again else None
             if got is not None:
-                s, e = got.start, got.start + len(got.qpos) - 1
-                qpos[s : e + 1], mpjpe[s : e + 1], contacts[s : e + 1] = got.qpos, got.mpjpe, got.contacts
-                for a in (res_f, res_t, peak_f, peak_t):
-                    a[s + 1 : e + 1] = 0.0  # no outside hand while it carries the body
-                over[s + 1 : e + 1] = at_cap[s + 1 : e + 1] = False
-                recovered_steps[s + 1 : e + 1] = True  # the steps it simulated, from the state at s
                 recovered += 1
-                data.qpos[:], data.qvel[:] = got.qpos[-1], got.qvel[-1]
-                mujoco.mj_forward(model, data)
-                k = earliest = e
+                k = earliest = take(got)
                 continue
             failed_at = k if failed_at is None else failed_at
             resets += 1
@@ -286,6 +323,12 @@ def control_step(
 
 # A residual within 0.1 % of a cap is held at it (the clip leaves it exactly at the cap, up to rounding).
 _AT_CAP = 0.999
+
+
+def _clearance(model, qpos: np.ndarray) -> float:
+    """The highest the body's lowest point gets over the floor in qpos (M, nq), metres."""
+    _, gpos, gmat = pose_frames(model, qpos)
+    return float(body_lowest(model, gpos, gmat).max())
 
 
 def contacts_of(model, data, foot_bodies: np.ndarray) -> np.ndarray:
