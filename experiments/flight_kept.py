@@ -3,7 +3,7 @@ then P under the sampling preset and variants of it, each against its own plain 
 
 Usage: python -m experiments.flight_kept [--seeds 0,1,2] [--seconds 4] [--variants sampling,ballistic,...]
        [--mode physdiff:end:2,space:1 --mode ...] [--mode-variant NAME ...] [--fallback] [--recover]
-       [--out results/flight_kept]
+       [--categories jump,hop] [--out results/flight_kept]
 
 Rows: each ``--mode`` (default: generate's default, PhysDiff with P at the last 2 steps) is ``generate``
 with that physics mode against the plain sample of the same prompt and seed; every other row is one P (as ``post:1``) of the plain samples under a variant of
@@ -33,6 +33,9 @@ from experiments._results import ROOT, heading, markdown_table, parse_args, repo
 
 FRESH: tuple[str, ...] = ("a person jumps up and lands softly", "someone jumps on the spot twice",
                           "a person skips forward", "someone hops over a small box")  # fmt: skip
+
+
+JUMPS: tuple[str, ...] = ("jump", "hop")  # the unseen-prompt categories measured by default
 
 
 def _variant(name: str):
@@ -94,11 +97,12 @@ def _cpu_wall() -> np.ndarray:
 
 def measure(seeds: list[int], seconds: float, variants: list[str], modes: list[str],
             fallback: bool = False, recover: bool = False,
-            mode_variants: tuple[str, ...] = ()) -> dict[str, dict]:  # fmt: skip
+            mode_variants: tuple[str, ...] = (), categories: tuple[str, ...] = JUMPS) -> dict[str, dict]:  # fmt: skip
     """Row name -> figures (see the module docstring); with ``fallback``, each mode again with the search
     as the tracker's fallback (row "<mode> +fallback"); with ``recover``, again with the other setting of
     the search carrying the body where the tracker would reset it (row "<mode> +recover" or "-recover");
-    for each of ``mode_variants``, again with that variant's P (row "<mode> [variant]")."""
+    for each of ``mode_variants``, again with that variant's P (row "<mode> [variant]"). The prompts are
+    those of ``categories`` in the unseen-prompt benchmark, and :data:`FRESH` with the jump categories."""
     from experiments.prompts import NEW_PROMPTS
     from physmotion.diffusion.model import MotionDiffusion
     from physmotion.diffusion.physdiff import on_data_floor
@@ -110,7 +114,7 @@ def measure(seeds: list[int], seconds: float, variants: list[str], modes: list[s
     from physmotion.physics.projection import project
     from physmotion.physics.surface import HumanoidSurface
 
-    prompts = [*NEW_PROMPTS["jump"], *NEW_PROMPTS["hop"], *FRESH]
+    prompts = [p for c in categories for p in NEW_PROMPTS[c]] + (list(FRESH) if categories == JUMPS else [])
     model = MotionDiffusion.load()
     plain, outputs, spent = [], {}, {}
     for seed in seeds:
@@ -168,6 +172,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--mode-variant", action="append", default=[],
                         help="each --mode again with this variant's P in place of the sampling preset "
                         "(repeatable)")
+    parser.add_argument("--categories", default=",".join(JUMPS),
+                        help="the unseen-prompt categories to generate (experiments/prompts.py NEW_PROMPTS); "
+                        "FRESH's prompts join the default jump and hop only")
     parser.add_argument("--out", default=str(ROOT / "results" / "flight_kept"))
     args = parse_args(parser, argv)
 
@@ -176,12 +183,18 @@ def main(argv: list[str] | None = None) -> int:
         variants = [v for v in args.variants.split(",") if v]
         for v in [*variants, *args.mode_variant]:
             _variant(v)  # a bad name fails before any work
+        from experiments.prompts import NEW_PROMPTS
+
+        categories = tuple(c for c in args.categories.split(",") if c)
+        if not categories or not set(categories) <= set(NEW_PROMPTS):
+            raise ValueError(f"--categories: choose from {', '.join(NEW_PROMPTS)}")
         from physmotion.generate import GenerateConfig
 
         modes = args.mode if args.mode is not None else [str(GenerateConfig().physics)]
         rows = measure(seeds, args.seconds, variants, [m for m in modes if m], args.fallback, args.recover,
-                       tuple(args.mode_variant))
-        meta = run_meta(__file__, argv, args.tree, {name: "sampling" for name in rows}, seeds=seeds, seconds=args.seconds)
+                       tuple(args.mode_variant), categories)
+        meta = run_meta(__file__, argv, args.tree, {name: "sampling" for name in rows}, seeds=seeds, seconds=args.seconds,
+                        categories=list(categories))
         header = ["row", "flight kept (median)", "flying samples", "outputs with a reset", "jumps past the sample's",
                   "root force p95, W", "root torque p95, W m", "held at a cap", "Phys-Err, mm", "searched",
                   "carried by the search, not reset",
@@ -192,7 +205,8 @@ def main(argv: list[str] | None = None) -> int:
                  f"{100 * r['residual_at_cap']:.0f} %", f"{r['phys_err']:.1f}", f"{100 * r['searched']:.0f} %",
                  f"{100 * r['recovered']:.0f} %",
                  f"{r['cpu_s_per_s']:.2f}", f"{r['wall_s_per_output']:.1f}"] for name, r in rows.items()]  # fmt: skip
-        table = heading("Flight kept by generation's P on jump and hop prompts", meta) + markdown_table(header, body)
+        kinds = "jump and hop" if categories == JUMPS else " and ".join(categories)
+        table = heading(f"Flight kept by generation's P on {kinds} prompts", meta) + markdown_table(header, body)
         return table, write_results(args.out, table, {"meta": meta, "rows": rows})
 
     return report(run)

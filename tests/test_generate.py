@@ -102,6 +102,21 @@ def test_the_search_fallback_is_chosen_per_run(tmp_path: Path) -> None:
     assert "Traceback" not in res.stderr and not (tmp_path / "o").exists()
 
 
+def test_the_flight_rescue_is_chosen_per_run(tmp_path: Path) -> None:
+    """``--rescue-flights`` on or off per run; it needs the search of ``--recover`` and is not for the search
+    controller; asking otherwise is one line before any work."""
+    on = GenerateConfig().with_flight_rescue(True)
+    assert on.projection.rescue_flight == 0.8 and on.with_flight_rescue(False).projection.rescue_flight == 0.0
+    assert GenerateConfig().projection.rescue_flight == 0.0  # off by default
+    with pytest.raises(PhysmotionError, match="--no-recover"):
+        GenerateConfig().with_search_recovery(False).with_flight_rescue(True)
+    for flags, said in ((["--no-recover"], "cannot be used with --no-recover"),
+                        (["--controller", "search"], "--rescue-flights is for the tracker")):  # fmt: skip
+        res = run("generate", "a person jumps", "-o", tmp_path / "o", *flags, "--rescue-flights")
+        assert res.returncode == 1 and said in res.stderr
+        assert "Traceback" not in res.stderr and not (tmp_path / "o").exists()
+
+
 @pytest.mark.slow
 def test_the_search_fallback_is_recorded_where_it_took_over(tiny_model, tmp_path: Path) -> None:
     """One P with the search as the tracker's fallback on the tiny model's run (which the tracker resets):
@@ -352,7 +367,8 @@ def test_console_script_generate_morph_writes_the_same_files(tmp_path: Path) -> 
     run_log = json.loads((tmp_path / "morph" / "generate.json").read_text())["runs"][-1]
     assert run_log["settings"]["physics"] == "morph"
     assert run_log["settings"]["morph_projection"] == {"reset_on_fail": False, "tau": 0.5, "sim_dt": 1 / 360,
-                                                       "search_fallback": False, "search_recover": False}
+                                                       "search_fallback": False, "search_recover": False,
+                                                       "flight_rescue": 0.0}
     assert run_log["projections"]["imitation_failures"] in (0, 1)
     assert 0.0 <= run_log["projections"]["imitation_failure_rate"] <= 1.0
     assert isinstance(run_log["motions"][0]["imitation_failed"], bool)

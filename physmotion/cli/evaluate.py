@@ -16,6 +16,7 @@ from physmotion.cli._common import (
     RECOVER_HELP,
     SAMPLER_HELP,
     SAMPLER_OPTIONS,
+    RESCUE_HELP,
     SEARCH_FALLBACK_HELP,
     _as_options,
     _check_out,
@@ -50,6 +51,7 @@ def evaluate_cmd(
     policy: Path | None = typer.Option(None, help=POLICY_HELP),
     search_fallback: bool = typer.Option(False, "--search-fallback", help=SEARCH_FALLBACK_HELP),
     recover: bool | None = typer.Option(None, "--recover/--no-recover", help=RECOVER_HELP),
+    rescue_flights: bool = typer.Option(False, "--rescue-flights", help=RESCUE_HELP),
     out: Path = typer.Option(Path("results/evaluate"), "-o", "--out", help="Writes <out>.md and <out>.json."),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
 ) -> None:
@@ -79,6 +81,8 @@ def evaluate_cmd(
         cfg.base = cfg.base.with_search_fallback(True)
     if recover is not None:
         cfg.base = cfg.base.with_search_recovery(recover)
+    if rescue_flights:
+        cfg.base = cfg.base.with_flight_rescue(True)
     parts = parts_folder(out)
     if found := count_parts(parts):
         typer.echo(f"{parts}: {found} finished run(s) of an earlier evaluation; those made with these "

@@ -21,6 +21,7 @@ from physmotion.cli._common import (
     RECOVER_HELP,
     SAMPLER_HELP,
     SAMPLER_OPTIONS,
+    RESCUE_HELP,
     SEARCH_FALLBACK_HELP,
     _as_options,
     _check_out,
@@ -141,6 +142,7 @@ def generate_cmd(
     policy: Path | None = typer.Option(None, help=POLICY_HELP),
     search_fallback: bool = typer.Option(False, "--search-fallback", help=SEARCH_FALLBACK_HELP),
     recover: bool | None = typer.Option(None, "--recover/--no-recover", help=RECOVER_HELP),
+    rescue_flights: bool = typer.Option(False, "--rescue-flights", help=RESCUE_HELP),
     preview: bool = typer.Option(True, help="Write a GIF preview per motion."),
     in_place: bool = typer.Option(False, "--in-place", help="Remove the root's horizontal travel (heading "
                                   "and height kept), for game loops."),
@@ -187,6 +189,8 @@ def generate_cmd(
         cfg = cfg.with_search_fallback(True)
     if recover is not None:
         cfg = cfg.with_search_recovery(recover)
+    if rescue_flights:
+        cfg = cfg.with_flight_rescue(True)
     check_outputs(texts, out, cfg, overwrite)
     net = MotionDiffusion.load(model)
     cfg.sampler = _with(default_sampler(net), sampler=sampler, steps=steps, eta=eta, cfg_scale=cfg_scale,

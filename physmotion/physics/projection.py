@@ -172,7 +172,8 @@ class ProjectionConfig:
             humanoid = search_humanoid(humanoid)
         return replace(self, controller=controller, policy=policy, search=search or self.search, humanoid=humanoid,
                        fallback=self.fallback and controller != "search",  # the search has no fallback
-                       recover=self.recover and controller != "search")  # nor anyone to recover it
+                       recover=self.recover and controller != "search",  # nor anyone to recover it
+                       rescue_flight=0.0 if controller == "search" else self.rescue_flight)
 
     def residual_bound(self) -> float:
         """The cap on the root residual's force (x body weight) of whoever drives the humanoid: the
@@ -570,7 +571,7 @@ def _recovery(model, config: ProjectionConfig) -> Recover:
     ahead = int(round(config.recover_ahead * rate))
 
     def recover(ref, states: np.ndarray, k: int, earliest: int,
-                accept: Callable[[Recovery], bool] | None) -> Recovery | None:  # fmt: skip
+                accept: Callable[[Recovery], bool] | None = None) -> Recovery | None:  # fmt: skip
         stop = min(len(ref.qpos), k + ahead + 1)
         starts: set[int] = set()
         for back in backs:

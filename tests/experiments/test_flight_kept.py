@@ -20,6 +20,7 @@ def test_every_variant_is_the_sampling_preset_with_one_change() -> None:
     assert base.recover and not _variant("no_recover").recover
     assert base.reach_arms and not _variant("copied_arms").reach_arms
     assert base.shaping.push_off and not _variant("no_push_off").shaping.push_off
+    assert _variant("rescue").rescue_flight == 0.8 and base.rescue_flight == 0.0
     through = _variant("feet_through_actuators").tracking  # the feet balance, through the actuators
     assert through.feet_balance and through.feet_through_actuators and not base.tracking.feet_balance
     searched = _variant("search")  # the search has no outside hand, so no fallback or recovery either
@@ -47,3 +48,10 @@ def test_the_cpu_clock_counts_live_worker_processes() -> None:
     cpu, wall = _cpu_wall() - before
     print(f"\nCPU {cpu:.2f} s in {wall:.2f} s of wall time, {own:.2f} s of it this process's")
     assert own < 0.1 and cpu >= 0.6  # two workers' loops (about 0.4 s each); this process only waited
+
+
+def test_a_category_the_benchmark_does_not_have_is_refused_before_any_work(capsys: pytest.CaptureFixture) -> None:
+    from experiments.flight_kept import main
+
+    assert main(["--categories", "swim", "--variants", "", "--allow-dirty", "--out", "/nonexistent/never"]) == 1
+    assert "--categories: choose from run, jog" in capsys.readouterr().err

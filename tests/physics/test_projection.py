@@ -332,6 +332,57 @@ def test_a_generated_jump_keeps_its_flight_with_a_faster_push_off() -> None:
     assert not ProjectionConfig().shaping.push_off  # the plain P, for captured motion, keeps its pace
 
 
+def _with_right_foot_tilted(monkeypatch: pytest.MonkeyPatch, degrees: float) -> None:
+    """P's humanoid built with its right foot bone pitched ``degrees`` more (toe down) than it fits."""
+    import physmotion.physics.projection as projection
+    from physmotion.skeleton import JOINT_INDEX
+
+    def tilted(joints: np.ndarray, fps: float = 20.0) -> np.ndarray:
+        off = body_from_joints(joints, fps)
+        v = off[JOINT_INDEX["right_foot"]]
+        flat, length = np.linalg.norm(v[[0, 2]]), np.linalg.norm(v)
+        p = np.arctan2(-v[1], flat) + np.radians(degrees)
+        off[JOINT_INDEX["right_foot"]] = length * np.array([v[0] / flat * np.cos(p), -np.sin(p), v[2] / flat * np.cos(p)])
+        return off
+
+    monkeypatch.setattr(projection, "body_from_joints", tilted)
+
+
+@pytest.mark.slow
+def test_a_take_off_that_falls_short_is_searched_again(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The shipped model's "a person jumps forward" (seed 0, 6 s): generation's tracker keeps 0.97 of its
+    flight (measured), but on a humanoid whose right foot is pitched 1 degree flatter it keeps 0.48: its
+    take-off speed turns on such details. With ``rescue_flight`` the search re-does every take-off whose
+    flight the body kept under 0.8 of the reference's, with no outside hand: the tilted body keeps the
+    flight (0.99 measured) and nothing is reset; on the fitted body the flights it re-did fly higher than
+    the tracker's, the frames before the first are the tracker's, and the search's frames have no hand."""
+    from physmotion.diffusion.model import MotionDiffusion
+    from physmotion.diffusion.physdiff import on_data_floor
+    from physmotion.generate import GenerateConfig, generate
+    from physmotion.metrics.actions import flight_height
+
+    sample = generate(["a person jumps forward"], GenerateConfig(seconds=6.0, physics="none", seed=0),
+                      model=MotionDiffusion.load()).motions[0].joints  # fmt: skip
+    x = on_data_floor(sample)
+    rescuing = ProjectionConfig.sampling(rescue_flight=0.8)
+    tracked, rescued = project(x, config=ProjectionConfig.sampling()), project(x, config=rescuing)
+    frames = np.flatnonzero(rescued.recovered_frames)
+    stretches = np.split(frames, np.flatnonzero(np.diff(frames) > 1) + 1)
+    higher = [(flight_height(tracked.joints[f].astype(np.float64)), flight_height(rescued.joints[f].astype(np.float64)))
+              for f in stretches]  # fmt: skip
+    print(f"\nre-done stretches {[(int(f[0]), int(f[-1])) for f in stretches]}, flight tracker -> search {np.round(higher, 3)}")
+    assert tracked.recovered == 0 and rescued.recovered >= 1 and rescued.resets == 0
+    assert all(b > a for a, b in higher)
+    assert not rescued.residual[frames].any() and not rescued.at_cap[frames].any()
+    before = slice(0, max(0, frames[0] - 1))
+    np.testing.assert_array_equal(rescued.joints[before], tracked.joints[before])
+    _with_right_foot_tilted(monkeypatch, -1.0)
+    kept = [flight_height(project(x, config=c).joints.astype(np.float64)) / flight_height(x)
+            for c in (ProjectionConfig.sampling(), rescuing)]  # fmt: skip
+    print(f"right foot 1 degree flatter: flight kept {kept[0]:.2f} by the tracker, {kept[1]:.2f} with the rescue")
+    assert kept[0] < 0.6 and kept[1] >= 0.8
+
+
 def test_a_first_frame_off_the_motions_path_is_mended_before_p_starts(walk: np.ndarray) -> None:
     """The walk with its first frame's right wrist 7 cm off (a denoiser's boundary artefact, as measured in
     PhysDiff's last x0: 6-9 cm): P starts the body where the motion goes, so the output moves into frame 1
@@ -462,6 +513,14 @@ def test_recover_is_for_the_tracker_with_resets() -> None:
         ProjectionConfig.sampling(recover_back=-1.0)
     with pytest.raises(ShapeError, match="recover_retry_back"):
         ProjectionConfig.sampling(recover_retry_back=6.0)
+
+
+def test_the_flight_rescue_needs_recover() -> None:
+    with pytest.raises(ShapeError, match="rescue_flight"):
+        ProjectionConfig.sampling(rescue_flight=1.5)
+    with pytest.raises(ShapeError, match="needs recover"):
+        ProjectionConfig.sampling(recover=False, rescue_flight=0.8)
+    assert ProjectionConfig.sampling(rescue_flight=0.8).with_controller("search").rescue_flight == 0.0
 
 
 def test_the_fallback_is_for_the_tracker() -> None:

@@ -1,5 +1,6 @@
 """The simulation loop: joint torques past the actuators' limits (the feet-balance path), every kind of help
-it counts, and the hand-overs to another controller in place of a reset (``simulate``'s ``recover``)."""
+it counts, and the hand-overs to another controller in place of a reset or of a take-off that falls short (``simulate``'s
+``recover`` and ``flights``)."""
 
 from __future__ import annotations
 
@@ -79,7 +80,7 @@ def test_a_body_handed_back_off_the_motion_goes_on_with_the_recovery() -> None:
     tracker = ModelBasedTracker(model, TrackingConfig(feet_balance=False))
 
     def carry_until(stop: int, calls: list):
-        def recover(ref, states, k, earliest):  # hold the state of step 5 (0.5 m off the motion) until stop
+        def recover(ref, states, k, earliest, accept):  # hold the state of step 5 (0.5 m off the motion) until stop
             calls.append((k, earliest))
             if len(calls) > 1:
                 return None  # handed back again: gives up
@@ -95,3 +96,47 @@ def test_a_body_handed_back_off_the_motion_goes_on_with_the_recovery() -> None:
     calls = []
     short = simulate(model, ref, tracker, fail_mpjpe=0.15, reset_on_fail=True, recover=carry_until(15, calls))
     assert calls == [(10, 0), (15, 15)] and short.recovered == 1 and short.resets == 1 and short.reset_steps[15]
+
+
+def test_a_flight_the_body_falls_short_of_is_handed_over_and_kept_only_where_it_flies_higher() -> None:
+    """``simulate``'s ``flights``: at a flight's check step, a body that has cleared the floor by less than
+    ``flight_kept`` x the reference's flight is handed to ``recover`` with a test of the stretch it returns;
+    a stretch in which the body flies higher is kept (no outside hand on it), one that does not leaves the
+    tracker's rollout as it was; a body that flies high enough is not handed over."""
+    from physmotion.physics.sim import FlightCheck, Recovery
+
+    model = build_model(REST_OFFSETS)
+    standing = np.repeat(rest_joints(REST_OFFSETS)[None], 20, axis=0)
+    ref = prepare_reference(model, joints_to_qpos(standing, model, lift=foot_lift(REST_OFFSETS)), 1 / 30)
+    tracker = ModelBasedTracker(model, TrackingConfig(feet_balance=False))
+    plain = simulate(model, ref, tracker, fail_mpjpe=10.0, reset_on_fail=True)
+
+    def lifted_by(dz: float, calls: list):
+        def recover(ref, states, k, earliest, accept):  # steps 5..k again, the body dz higher
+            calls.append(k)
+            qpos = states[5 : k + 1, : model.nq].copy()
+            qpos[:, 2] += dz
+            m = len(qpos)
+            got = Recovery(5, qpos, states[5 : k + 1, model.nq :], np.zeros(m), np.zeros((m, 4), dtype=bool))
+            return got if accept(got) else None
+
+        return recover
+
+    flight = [FlightCheck(takeoff=5, check=10, height=0.2)]  # a 20 cm flight the standing body never makes
+    calls: list = []
+    higher = simulate(model, ref, tracker, fail_mpjpe=10.0, reset_on_fail=True, recover=lifted_by(0.3, calls),
+                      flights=flight, flight_kept=0.8)  # fmt: skip
+    assert calls == [10] and higher.recovered == 1 and higher.resets == 0
+    np.testing.assert_allclose(higher.qpos[5:11, 2], plain.qpos[5:11, 2] + 0.3)
+    assert higher.recovered_steps[6:11].all() and not higher.recovered_steps[11:].any()
+    assert not higher.residual_force[6:11].any() and higher.residual_force[12:].all()
+    calls = []
+    level = simulate(model, ref, tracker, fail_mpjpe=10.0, reset_on_fail=True, recover=lifted_by(0.0, calls),
+                     flights=flight, flight_kept=0.8)  # fmt: skip
+    assert calls == [10] and level.recovered == 0
+    np.testing.assert_array_equal(level.qpos, plain.qpos)
+    calls = []
+    low = [FlightCheck(takeoff=5, check=10, height=-1.0)]  # a "flight" 1 m under the floor: the body clears it
+    kept = simulate(model, ref, tracker, fail_mpjpe=10.0, reset_on_fail=True, recover=lifted_by(0.3, calls),
+                    flights=low, flight_kept=0.8)  # fmt: skip
+    assert calls == [] and kept.recovered == 0
