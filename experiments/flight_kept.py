@@ -97,7 +97,8 @@ def _cpu_wall() -> np.ndarray:
 
 def measure(seeds: list[int], seconds: float, variants: list[str], modes: list[str],
             fallback: bool = False, recover: bool = False,
-            mode_variants: tuple[str, ...] = (), categories: tuple[str, ...] = JUMPS) -> dict[str, dict]:  # fmt: skip
+            mode_variants: tuple[str, ...] = (),
+            categories: tuple[str, ...] = JUMPS) -> dict[str, dict]:  # fmt: skip
     """Row name -> figures (see the module docstring); with ``fallback``, each mode again with the search
     as the tracker's fallback (row "<mode> +fallback"); with ``recover``, again with the other setting of
     the search carrying the body where the tracker would reset it (row "<mode> +recover" or "-recover");
@@ -193,8 +194,8 @@ def main(argv: list[str] | None = None) -> int:
         modes = args.mode if args.mode is not None else [str(GenerateConfig().physics)]
         rows = measure(seeds, args.seconds, variants, [m for m in modes if m], args.fallback, args.recover,
                        tuple(args.mode_variant), categories)
-        meta = run_meta(__file__, argv, args.tree, {name: "sampling" for name in rows}, seeds=seeds, seconds=args.seconds,
-                        categories=list(categories))
+        meta = run_meta(__file__, argv, args.tree, {name: "sampling" for name in rows}, seeds=seeds,
+                        seconds=args.seconds, categories=list(categories))
         header = ["row", "flight kept (median)", "flying samples", "outputs with a reset", "jumps past the sample's",
                   "root force p95, W", "root torque p95, W m", "held at a cap", "Phys-Err, mm", "searched",
                   "carried by the search, not reset",
@@ -206,7 +207,8 @@ def main(argv: list[str] | None = None) -> int:
                  f"{100 * r['recovered']:.0f} %",
                  f"{r['cpu_s_per_s']:.2f}", f"{r['wall_s_per_output']:.1f}"] for name, r in rows.items()]  # fmt: skip
         kinds = "jump and hop" if categories == JUMPS else " and ".join(categories)
-        table = heading(f"Flight kept by generation's P on {kinds} prompts", meta) + markdown_table(header, body)
+        title = f"Flight kept by generation's P on {kinds} prompts"
+        table = heading(title, meta) + markdown_table(header, body)
         return table, write_results(args.out, table, {"meta": meta, "rows": rows})
 
     return report(run)

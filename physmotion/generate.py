@@ -84,14 +84,15 @@ class GenerateConfig:
         return replace(self, projection=replace(self.projection, recover=on))
 
     def with_flight_rescue(self, on: bool) -> GenerateConfig:
-        """This run with PhysDiff's and post's P handing a take-off whose flight the body kept under 0.8 of the
-        motion's to the search, or not (``ProjectionConfig.rescue_flight``; ``generate --rescue-flights``)."""
+        """This run with PhysDiff's and post's P handing a take-off whose flight the body kept under 0.8 of
+        the motion's to the search, or not (``ProjectionConfig.rescue_flight``;
+        ``generate --rescue-flights``)."""
         if on and self.projection.controller == "search":
             raise PhysmotionError("--rescue-flights is for the tracker and the policy; --controller search "
                                   "searches every take-off already")
         if on and not self.projection.recover:
-            raise PhysmotionError("--rescue-flights hands take-offs to the search of --recover: it cannot be used "
-                                  "with --no-recover")
+            raise PhysmotionError("--rescue-flights hands take-offs to the search of --recover: it cannot be "
+                                  "used with --no-recover")
         return replace(self, projection=replace(self.projection, rescue_flight=0.8 if on else 0.0))
 
     def with_controller(self, controller: str, policy: str | None = None) -> GenerateConfig:

@@ -218,7 +218,8 @@ def test_help_defaults_are_the_dataclasses() -> None:
                 "sampler": gen.sampler.sampler, "steps": gen.sampler.steps, "eta": gen.sampler.eta,
                 "cfg-scale": gen.sampler.cfg_scale, "phys-scale": BIOMO_SAMPLER.phys_scale,
                 "speed": gen.sampler.speed, "search-fallback": "on" if gen.projection.fallback else "off",
-                "recover": "on" if gen.projection.recover else "off"}  # fmt: skip
+                "recover": "on" if gen.projection.recover else "off",
+                "rescue-flights": "on" if gen.projection.rescue_flight else "off"}  # fmt: skip
     stated = _help_defaults("generate")
     assert set(stated) == set(expected)
     for name, value in expected.items():
@@ -243,7 +244,8 @@ def test_help_defaults_are_the_dataclasses() -> None:
                 "steps": ev.base.sampler.steps, "seed": ev.seed, "sampler": ev.base.sampler.sampler,
                 "eta": ev.base.sampler.eta, "cfg-scale": ev.base.sampler.cfg_scale,
                 "search-fallback": "on" if ev.base.projection.fallback else "off",
-                "recover": "on" if ev.base.projection.recover else "off"}  # fmt: skip
+                "recover": "on" if ev.base.projection.recover else "off",
+                "rescue-flights": "on" if ev.base.projection.rescue_flight else "off"}  # fmt: skip
     assert _help_defaults("evaluate") == {k: f"{v:g}" if isinstance(v, float) else str(v)
                                           for k, v in expected.items()}  # fmt: skip
 

@@ -105,9 +105,10 @@ RECOVER_HELP = ("Where the tracker (or the policy) falls, let the search carry t
                 "the motion; seconds of CPU per stretch carried (results/recover_jumps.md). --no-recover "
                 "resets at once: faster on motions that fall (default: on).")
 RESCUE_HELP = ("Where the body under the tracker (or the policy) clears the floor by less than 0.8 of a "
-               "flight of the motion, let the search re-do that take-off with no outside hand from 0.5 s before "
-               "its highest (1 s where that falls short), kept where the body flies higher; seconds of CPU per "
-               "flight re-done (results/flight_kept_rescue.md) (default: off).")
+               "flight of the motion, let the search re-do that take-off with no outside hand, from 0.5 s "
+               "before the flight's highest (1 s before where that falls or flies no higher), kept where the "
+               "body flies higher. Jumps keep more of their flight, but runs leap higher than their samples; "
+               "about 2x the CPU on both (results/flight_kept_rescue*.md) (default: off).")
 POLICY_HELP = ("With --controller policy: the policy folder (the shipped one if left out). With --controller search: a "
                "policy that proposes each window's first mean (amortized search, `train student`).")
 PREVIEW_HELP = ("Write a GIF preview beside the output, <stem>.gif (under a second for a 6 s motion; "

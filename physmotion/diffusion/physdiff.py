@@ -38,7 +38,8 @@ from physmotion.physics.projection import ProjectionConfig, SimRecord, project
 
 def projection_settings(config: ProjectionConfig) -> dict[str, bool | float]:
     """How P treats a fall, the step it simulates at (``--fine-step`` halves it) and whether the search
-    is the tracker's fallback, carries falls or re-does short take-offs, as recorded with generated files and evaluation tables."""
+    is the tracker's fallback, carries falls or re-does short take-offs, as recorded with generated files
+    and evaluation tables."""
     return {"reset_on_fail": config.reset_on_fail, "tau": config.tau, "sim_dt": config.humanoid.sim_dt,
             "search_fallback": config.fallback, "search_recover": config.recover,
             "flight_rescue": config.rescue_flight}

@@ -108,8 +108,9 @@ class ProjectionConfig:
     recover_ahead: float = 0.5
     recover_retry_back: float = 1.0
     # With recover: where the body has cleared the floor by less than ``rescue_flight`` x the shaped
-    # reference's clearance just past a flight's highest (a flight of at least ``metrics.dynamics.MIN_FLIGHT``),
-    # the search re-does that take-off the same way (no outside hand), kept where the body flies higher in it.
+    # reference's clearance just past a flight's highest (a flight of at least
+    # ``metrics.dynamics.MIN_FLIGHT``), the search re-does that take-off the same way (no outside hand),
+    # kept where the body flies higher in it.
     # The tracker's take-off speed turns on small details of the body and its contacts (docs/limitations.md);
     # 0: off (docs/decisions/projection.md: "the search where a take-off falls short").
     rescue_flight: float = 0.0
@@ -489,12 +490,13 @@ def _project_one(x: np.ndarray, fps: float, config: ProjectionConfig,
         return _search_one(prep, x, fps, config, on_step) | {"searched": np.array(True)} | ref_field
     tracker = _controller(model, config)  # holds no episode state: one serves every pass
     reference, best = target, None
+    checks = _flight_checks(model, target, config)
     for ilc_pass in range(config.ilc_passes + 1):
         ref = prepare_reference(model, reference, config.humanoid.control_dt, config.tracking)
         roll = simulate(model, ref, tracker, config.humanoid, fail_mpjpe=config.tau,
                         reset_on_fail=config.reset_on_fail, follow_drift=config.follow_drift,
                         let_land=config.let_land, recover=_recovery(model, config) if config.recover else None,
-                        flights=_flight_checks(model, target, config), flight_kept=config.rescue_flight)
+                        flights=checks, flight_kept=config.rescue_flight)  # fmt: skip
         out = _back_to_input_rate(roll, model, lift, x, fps, ctrl_fps, config.tau, config.reset_on_fail,
                                   grounded, config.crossfade)  # fmt: skip
         score = (not bool(out["success"]), float(out["mpjpe"].mean()))
@@ -600,8 +602,8 @@ def _flight_checks(model, target: np.ndarray, config: ProjectionConfig) -> list[
     if not config.rescue_flight:
         return []
     sh = config.shaping
-    return [FlightCheck(a, top + 1, height) for a, top, height in
-            flights(model, target, config.humanoid.control_dt, sh.support, sh.float_window) if height >= MIN_FLIGHT]
+    found = flights(model, target, config.humanoid.control_dt, sh.support, sh.float_window)
+    return [FlightCheck(a, top + 1, height) for a, top, height in found if height >= MIN_FLIGHT]
 
 
 def _search_one(prep: PreparedMotion, x: np.ndarray, fps: float, config: ProjectionConfig,

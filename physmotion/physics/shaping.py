@@ -193,7 +193,8 @@ def push_off(model, qpos: np.ndarray, dt: float, config: ShapingConfig) -> np.nd
     return out
 
 
-def flights(model, qpos: np.ndarray, dt: float, support: float, longest: float) -> list[tuple[int, int, float]]:
+def flights(model, qpos: np.ndarray, dt: float, support: float,
+            longest: float) -> list[tuple[int, int, float]]:  # fmt: skip
     """The flight phases of qpos (N, 70) at step ``dt`` (as :func:`ballistic_flight` finds them): for each,
     its take-off frame, the frame where the body's lowest point is highest, and that height (m)."""
     spans = _flight_spans(model, qpos, dt, support, longest)

@@ -134,8 +134,8 @@ class Recovery:
     contacts: np.ndarray
 
 
-# recover(ref, states (k + 1, nq + nv) of steps 0..k, k, earliest start, accept) -> a Recovery ending after k, or
-# None; accept (None: any): whether a stretch that did not fall is good enough to keep
+# recover(ref, states (k + 1, nq + nv) of steps 0..k, k, earliest start, accept) -> a Recovery ending after
+# k, or None; accept (None: any): whether a stretch that did not fall is good enough to keep
 Recover = Callable[[Reference, np.ndarray, int, int, "Callable[[Recovery], bool] | None"], "Recovery | None"]
 
 

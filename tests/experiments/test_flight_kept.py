@@ -50,8 +50,9 @@ def test_the_cpu_clock_counts_live_worker_processes() -> None:
     assert own < 0.1 and cpu >= 0.6  # two workers' loops (about 0.4 s each); this process only waited
 
 
-def test_a_category_the_benchmark_does_not_have_is_refused_before_any_work(capsys: pytest.CaptureFixture) -> None:
+def test_an_unknown_category_is_refused_before_any_work(capsys: pytest.CaptureFixture) -> None:
     from experiments.flight_kept import main
 
-    assert main(["--categories", "swim", "--variants", "", "--allow-dirty", "--out", "/nonexistent/never"]) == 1
+    argv = ["--categories", "swim", "--variants", "", "--allow-dirty", "--out", "/nonexistent/never"]
+    assert main(argv) == 1
     assert "--categories: choose from run, jog" in capsys.readouterr().err

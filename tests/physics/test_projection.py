@@ -342,7 +342,8 @@ def _with_right_foot_tilted(monkeypatch: pytest.MonkeyPatch, degrees: float) -> 
         v = off[JOINT_INDEX["right_foot"]]
         flat, length = np.linalg.norm(v[[0, 2]]), np.linalg.norm(v)
         p = np.arctan2(-v[1], flat) + np.radians(degrees)
-        off[JOINT_INDEX["right_foot"]] = length * np.array([v[0] / flat * np.cos(p), -np.sin(p), v[2] / flat * np.cos(p)])
+        direction = np.array([v[0] / flat * np.cos(p), -np.sin(p), v[2] / flat * np.cos(p)])
+        off[JOINT_INDEX["right_foot"]] = length * direction
         return off
 
     monkeypatch.setattr(projection, "body_from_joints", tilted)
@@ -368,9 +369,10 @@ def test_a_take_off_that_falls_short_is_searched_again(monkeypatch: pytest.Monke
     tracked, rescued = project(x, config=ProjectionConfig.sampling()), project(x, config=rescuing)
     frames = np.flatnonzero(rescued.recovered_frames)
     stretches = np.split(frames, np.flatnonzero(np.diff(frames) > 1) + 1)
-    higher = [(flight_height(tracked.joints[f].astype(np.float64)), flight_height(rescued.joints[f].astype(np.float64)))
+    higher = [tuple(flight_height(out.joints[f].astype(np.float64)) for out in (tracked, rescued))
               for f in stretches]  # fmt: skip
-    print(f"\nre-done stretches {[(int(f[0]), int(f[-1])) for f in stretches]}, flight tracker -> search {np.round(higher, 3)}")
+    print(f"\nre-done stretches {[(int(f[0]), int(f[-1])) for f in stretches]}, flight tracker -> search "
+          f"{np.round(higher, 3)}")
     assert tracked.recovered == 0 and rescued.recovered >= 1 and rescued.resets == 0
     assert all(b > a for a, b in higher)
     assert not rescued.residual[frames].any() and not rescued.at_cap[frames].any()
@@ -379,7 +381,7 @@ def test_a_take_off_that_falls_short_is_searched_again(monkeypatch: pytest.Monke
     _with_right_foot_tilted(monkeypatch, -1.0)
     kept = [flight_height(project(x, config=c).joints.astype(np.float64)) / flight_height(x)
             for c in (ProjectionConfig.sampling(), rescuing)]  # fmt: skip
-    print(f"right foot 1 degree flatter: flight kept {kept[0]:.2f} by the tracker, {kept[1]:.2f} with the rescue")
+    print(f"right foot 1 degree flatter: flight kept {kept[0]:.2f} by the tracker, {kept[1]:.2f} rescued")
     assert kept[0] < 0.6 and kept[1] >= 0.8
 
 

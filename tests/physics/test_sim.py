@@ -1,6 +1,6 @@
 """The simulation loop: joint torques past the actuators' limits (the feet-balance path), every kind of help
-it counts, and the hand-overs to another controller in place of a reset or of a take-off that falls short (``simulate``'s
-``recover`` and ``flights``)."""
+it counts, and the hand-overs to another controller in place of a reset or of a take-off that falls short
+(``simulate``'s ``recover`` and ``flights``)."""
 
 from __future__ import annotations
 
@@ -80,7 +80,7 @@ def test_a_body_handed_back_off_the_motion_goes_on_with_the_recovery() -> None:
     tracker = ModelBasedTracker(model, TrackingConfig(feet_balance=False))
 
     def carry_until(stop: int, calls: list):
-        def recover(ref, states, k, earliest, accept):  # hold the state of step 5 (0.5 m off the motion) until stop
+        def recover(ref, states, k, earliest, accept):  # hold step 5's state (0.5 m off) until stop
             calls.append((k, earliest))
             if len(calls) > 1:
                 return None  # handed back again: gives up
@@ -136,7 +136,7 @@ def test_a_flight_the_body_falls_short_of_is_handed_over_and_kept_only_where_it_
     assert calls == [10] and level.recovered == 0
     np.testing.assert_array_equal(level.qpos, plain.qpos)
     calls = []
-    low = [FlightCheck(takeoff=5, check=10, height=-1.0)]  # a "flight" 1 m under the floor: the body clears it
+    low = [FlightCheck(takeoff=5, check=10, height=-1.0)]  # a "flight" 1 m under the floor: cleared
     kept = simulate(model, ref, tracker, fail_mpjpe=10.0, reset_on_fail=True, recover=lifted_by(0.3, calls),
                     flights=low, flight_kept=0.8)  # fmt: skip
     assert calls == [] and kept.recovered == 0
