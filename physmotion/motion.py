@@ -44,7 +44,8 @@ class Motion:
     searched: for P's output, whether the search (no outside hand) made it, as the controller or as the
     tracker's fallback (``ProjectedMotion.searched``, in any P call); None where P was not applied.
     recovered: for P's output, how many stretches the search carried with no outside hand where the humanoid
-    would have been put back on the motion (``ProjectedMotion.recovered``, over every P call); None where P
+    would have been put back on the motion, or re-did where a take-off fell short (``--rescue-flights``)
+    (``ProjectedMotion.recovered``, over every P call); None where P
     was not applied (or the file predates it).
     """
 

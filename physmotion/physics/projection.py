@@ -272,7 +272,8 @@ class ProjectedMotion:
     are bounded, that path is not (:func:`~physmotion.physics.sim.control_step`).
     searched: (B,) bool, the search made the motion (``controller`` "search", or as the tracker's
     ``fallback``): no outside hand on it.
-    recovered: (B,) int, stretches the search carried in place of a reset (``ProjectionConfig.recover``);
+    recovered: (B,) int, stretches the search carried in place of a reset (``ProjectionConfig.recover``) or
+    re-did where a take-off fell short (``rescue_flight``);
     recovered_frames: (B, T) bool, frames all of whose control steps the search simulated: no outside hand.
     reference_step: (B,) metres, the largest frame-to-frame joint move of the reference P tracked (the input
     retargeted onto the humanoid and shaped, at the input rate): a jump in the output that the reference
@@ -335,7 +336,8 @@ class SimRecord:
     held at a cap; over_limit: (T,) bool, a joint's torque past its actuator's limit; reset_frames: (T,)
     bool, frames not simulated (a reset and the cross-fade before it); searched: the search made it
     (``ProjectionConfig.controller`` or ``fallback``); recovered: stretches the search carried, with no
-    outside hand, where the humanoid would have been reset (``ProjectionConfig.recover``)."""
+    outside hand, where the humanoid would have been reset (``ProjectionConfig.recover``) or a take-off fell
+    short (``rescue_flight``)."""
 
     resets: int
     residual: np.ndarray

@@ -43,9 +43,9 @@ class Rollout:
     at_cap: (N,) bool, steps in which some residual update was held at one of the controller's caps
     (force, lift or torque: :meth:`~physmotion.physics.tracking.Controller.caps`).
     reset_steps: (N,) bool, steps at which the humanoid was put back on the reference (``reset_on_fail``).
-    recovered: how many stretches another controller carried in place of a reset (``simulate``'s
-    ``recover``); recovered_steps: (N,) bool, the steps it simulated (each from the state before it), with no
-    outside hand.
+    recovered: how many stretches another controller carried in place of a reset or re-did where a take-off
+    fell short (``simulate``'s ``recover`` and ``flights``); recovered_steps: (N,) bool, the steps it
+    simulated (each from the state before it), with no outside hand.
     """
 
     qpos: np.ndarray
