@@ -197,20 +197,18 @@ def flights(model, qpos: np.ndarray, dt: float, support: float,
             longest: float) -> list[tuple[int, int, float]]:  # fmt: skip
     """The flight phases of qpos (N, 70) at step ``dt`` (as :func:`ballistic_flight` finds them): for each,
     its take-off frame, the frame where the body's lowest point is highest, and that height (m)."""
-    spans = _flight_spans(model, qpos, dt, support, longest)
-    if not spans:
-        return []
     low = _lowest(model, qpos)
+    spans = _flight_spans(model, qpos, dt, support, longest, low)
     tops = [a + 1 + int(np.argmax(low[a + 1 : b])) for a, b in spans]
     return [(a, top, float(low[top])) for (a, _), top in zip(spans, tops)]
 
 
-def _flight_spans(model, qpos: np.ndarray, dt: float, support: float,
-                  longest: float) -> list[tuple[int, int]]:  # fmt: skip
+def _flight_spans(model, qpos: np.ndarray, dt: float, support: float, longest: float,
+                  low: np.ndarray | None = None) -> list[tuple[int, int]]:  # fmt: skip
     """Flight phases of qpos (N, 70) at step ``dt``: (take-off frame, landing frame) pairs around each run
     of frames with no geom within ``support`` of the floor, at most ``longest`` seconds from one to the
-    other, with a frame on the floor at both ends."""
-    air = _lowest(model, qpos) > support
+    other, with a frame on the floor at both ends. low: (N,) the frames' lowest points, if known already."""
+    air = (_lowest(model, qpos) if low is None else low) > support
     edges = np.flatnonzero(np.diff(np.r_[0, air.astype(np.int8), 0]))
     spans = [(s - 1, e) for s, e in zip(edges[::2], edges[1::2]) if s > 0 and e < len(qpos)]
     return [(a, b) for a, b in spans if (b - a) * dt <= longest]
